@@ -1,0 +1,17 @@
+# Two front-door targets: `make demo` and `make test`. Both set everything up first.
+.PHONY: setup demo test test-slow bench
+
+setup:
+	bash scripts/setup.sh
+
+demo: setup
+	bash scripts/demo.sh
+
+test: setup
+	.venv/bin/python -m pytest -q
+
+test-slow: setup
+	.venv/bin/python -m pytest -q -m slow
+
+bench: setup
+	.venv/bin/python benchmarks/render.py

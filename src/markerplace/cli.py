@@ -1,0 +1,137 @@
+"""Command line: parses arguments and chains library stages; no logic of its own.
+
+Every user-fixable problem surfaces as :class:`~markerplace.errors.UserError`: printed as one
+line ``markerplace: error: ...`` with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from . import __version__
+from .errors import UserError
+from .log import setup_logging
+
+log = logging.getLogger("markerplace.cli")
+
+
+def _add_scene_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
+    p.add_argument("--up", default=None, help="up axis of an OBJ/PLY file: z (default), y, -y, x, -x, -z; glTF is always y-up")
+    p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")
+
+
+def _parse_pose(text: str):
+    parts = text.split(",")
+    if len(parts) != 4:
+        raise UserError(f"--pose {text!r} must be X,Y,Z,YAW_DEG (four comma-separated numbers)")
+    try:
+        return [float(v) for v in parts]
+    except ValueError:
+        raise UserError(f"--pose {text!r} must be X,Y,Z,YAW_DEG (four comma-separated numbers)") from None
+
+
+def cmd_scene_list(args: argparse.Namespace) -> int:
+    from .scene.catalogue import list_scenes
+
+    rows = list_scenes()
+    print(f"{'name':<10} {'floor area (m^2)':>16} {'rooms':>6}  description")
+    for r in rows:
+        print(f"{r['name']:<10} {r['area_m2']:>16.1f} {r['rooms']:>6}  {r['description']}")
+    return 0
+
+
+def cmd_scene_export(args: argparse.Namespace) -> int:
+    from .scene import load_scene
+    from .scene.export import export_glb
+
+    scene = load_scene(args.name, seed=args.seed)
+    export_glb(scene, args.out)
+    log.info("wrote %s (%d faces)", args.out, scene.num_faces)
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .geometry import Intrinsics, world_from_cam_pose
+    from .markers import load_markers
+    from .render.renderer import Renderer
+    from .render.views import default_pose, write_render_outputs
+    from .scene import load_scene
+
+    scene = load_scene(args.scene, up=args.up, unit_scale=args.unit_scale, seed=args.seed)
+    markers = load_markers(args.markers) if args.markers else []
+    if args.pose:
+        x, y, z, yaw_deg = _parse_pose(args.pose)
+        world_from_cam = world_from_cam_pose(np.array([x, y, z]), np.radians(yaw_deg))
+    else:
+        world_from_cam = default_pose(scene)
+    intr = Intrinsics.from_fov(args.width, args.height, args.hfov)
+    with Renderer(scene, intr, markers=markers) as renderer:
+        result = renderer.render(world_from_cam)
+    paths = write_render_outputs(args.out, result)
+    for p in paths:
+        print(p)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="markerplace",
+        description="Plan where to put AprilTag markers so camera localization works better (OMP), and prove it in simulation.",
+    )
+    parser.add_argument("--version", action="version", version=f"markerplace {__version__}")
+    parser.add_argument("--quiet", action="store_true", help="only warnings and errors, no progress bars")
+    parser.add_argument("--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p_scene = sub.add_parser("scene", help="built-in scenes: list them or export one as glTF")
+    scene_sub = p_scene.add_subparsers(dest="scene_command", metavar="SUBCOMMAND")
+    p_list = scene_sub.add_parser("list", help="print name, floor area and rooms of each built-in scene")
+    p_list.set_defaults(func=cmd_scene_list)
+    p_export = scene_sub.add_parser("export", help="write a built-in scene as a standard binary glTF (.glb, y-up)")
+    p_export.add_argument("name", help="built-in scene name")
+    p_export.add_argument("out", help="output path, e.g. office.glb")
+    p_export.add_argument("--seed", type=int, default=0, help="seed of the procedural generator (default 0)")
+    p_export.set_defaults(func=cmd_scene_export)
+
+    p_render = sub.add_parser("render", help="render RGB, depth and normals of a scene at one camera pose")
+    _add_scene_args(p_render)
+    p_render.add_argument("--pose", default=None, help="camera X,Y,Z,YAW_DEG (world, metres; yaw CCW from +x); default: a pose inside the scene")
+    p_render.add_argument("--markers", default=None, help="JSON file of markers to draw (e.g. a placement.json)")
+    p_render.add_argument("--out", required=True, help="output prefix: writes PREFIX_rgb.png, PREFIX_depth.npy, PREFIX_normal.png")
+    p_render.add_argument("--width", type=int, default=600, help="image width in pixels (default 600)")
+    p_render.add_argument("--height", type=int, default=450, help="image height in pixels (default 450)")
+    p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    p_render.set_defaults(func=cmd_render)
+
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    setup_logging(quiet=args.quiet, verbose=args.verbose)
+    func = getattr(args, "func", None)
+    if func is None:
+        # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
+        if args.command == "scene":
+            parser.parse_args(["scene", "--help"])
+        parser.print_help()
+        return 2
+    try:
+        return int(func(args) or 0)
+    except UserError as err:
+        print(f"markerplace: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("markerplace: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
