@@ -79,6 +79,82 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_xy(text: str | None):
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        return (float(parts[0]), float(parts[1]))
+    except ValueError:
+        raise UserError(f"--start {text!r} must be X,Y (two comma-separated numbers, metres)") from None
+
+
+def plan_config_from_args(args: argparse.Namespace):
+    """Build a :class:`~markerplace.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
+    from dataclasses import replace
+
+    from .discretize import DiscretizeConfig
+    from .observe import ObserveConfig
+    from .planner import PlacementConfig, PlanConfig
+
+    disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=_parse_xy(args.start),
+                   grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
+                   marker_spacing=args.marker_spacing, tag_size=args.tag_size)
+    placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
+                                marker_model=args.marker_model, tag_size=args.tag_size,
+                                similarity=not args.no_similarity, seed=args.placement_seed)
+    return PlanConfig(discretize=disc, observe=ObserveConfig(workers=args.workers), placement=placement)
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from .markers import load_markers
+    from .observe import SceneSpec
+    from .planner import first_pick_gain, place, prepare, validate
+    from .report.plan_outputs import write_plan_outputs
+
+    config = plan_config_from_args(args)
+    validate(config)
+    existing = load_markers(args.existing) if args.existing else []
+    spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
+    progress = not args.quiet
+    data = prepare(spec, config, args.out, existing=existing, progress=progress)
+    placement = place(data, config.placement, existing=existing, progress=progress)
+    from .planner import _apply
+
+    existing_info = _apply(data.base_info, data.coverages[data.num_candidates:])
+    summary = write_plan_outputs(args.out, data=data, placement=placement,
+                                 first_gain=first_pick_gain(data, placement, existing_info), config=config,
+                                 method=config.placement.method, scene_source=args.scene, existing=existing)
+    log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
+             len(placement.markers), config.placement.method, summary["mean_score_before"],
+             summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
+    log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in data.timings.items()))
+    print(f"wrote {args.out}/placement.json, placement.csv, scores.npz, scores.png, gain_first.png, placement.png, config.json")
+    return 0
+
+
+def _add_plan_args(p: argparse.ArgumentParser) -> None:
+    """Options shared by `plan` and `evaluate` (discretization, scoring)."""
+    g = p.add_argument_group("discretization")
+    g.add_argument("--height", type=float, default=1.5, help="eye-level plane height above the floor, metres (default 1.5)")
+    g.add_argument("--level", type=int, default=0, help="storey of a multi-storey model, 0 = lowest (default 0)")
+    g.add_argument("--start", default=None, help="X,Y start point of the free-space scan (default: automatic)")
+    g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
+    g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")
+    g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")
+    g.add_argument("--marker-spacing", type=float, default=1.0, help="minimum spacing of candidate marker poses on a wall, metres (default 1.0)")
+    g = p.add_argument_group("scoring and placement")
+    g.add_argument("--tag-size", type=float, default=0.4, help="black-square edge of the printed tags, metres (default 0.4)")
+    g.add_argument("-v", type=float, default=90.0, help="OMP percentile parameter v in [0, 100] (default 90)")
+    g.add_argument("--marker-model", default="paper", choices=["paper", "corners"], help="marker information model (default paper)")
+    g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
+    g.add_argument("--placement-seed", type=int, default=0, help="seed of the random/uniform baselines (default 0)")
+    g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="markerplace",
@@ -108,6 +184,15 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--height", type=int, default=450, help="image height in pixels (default 450)")
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p_render.set_defaults(func=cmd_render)
+
+    p_plan = sub.add_parser("plan", help="place k markers (OMP greedy, or random/uniform baselines) and write the plan")
+    _add_scene_args(p_plan)
+    p_plan.add_argument("-k", type=int, default=20, help="number of markers to place (default 20)")
+    p_plan.add_argument("--out", required=True, help="run directory (stages are cached here and reused)")
+    p_plan.add_argument("--method", default="omp", choices=["omp", "random", "uniform"], help="placement method (default omp)")
+    p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
+    _add_plan_args(p_plan)
+    p_plan.set_defaults(func=cmd_plan)
 
     return parser
 

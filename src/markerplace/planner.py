@@ -1,0 +1,287 @@
+"""The OMP planning pipeline: discretize -> observe -> similarity -> score -> place.
+
+Each stage's artifact lives in the run directory with a hash of the inputs it came from
+(:mod:`markerplace.cache`), so re-running ``plan`` with a different k, method or v reuses the
+expensive stages (rendering, SIFT, similarity) and only re-runs placement.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from . import cache
+from .discretize import DiscretizeConfig, Discretization, discretize
+from .discretize import load as load_discretization
+from .discretize import save as save_discretization
+from .errors import UserError
+from .localizability import (
+    NoiseConfig,
+    entropy,
+    information_gain,
+    marker_information_corners,
+    marker_information_paper,
+    marker_visibility,
+    pose_information,
+)
+from .markers import DEFAULT_TAG_SIZE, FAMILY, Marker
+from .observe import ObserveConfig, Observations, SceneSpec, observe
+from .placement import MarkerCoverage, omp_greedy, random_placement, uniform_placement
+from .similarity import SimilarityConfig, count_similar
+
+log = logging.getLogger(__name__)
+
+METHODS = ("omp", "random", "uniform")
+MARKER_MODELS = ("paper", "corners")
+
+
+@dataclass(frozen=True)
+class PlacementConfig:
+    """How markers are chosen.
+
+    Attributes:
+        k: number of markers to place.
+        method: ``omp`` (the paper's greedy), ``random`` (seeded uniform sample of candidates)
+            or ``uniform`` (evenly spaced along the free-space perimeter).
+        v: OMP hyper-parameter in [0, 100]: the most visible v percent of candidates compete.
+        marker_model: ``paper`` (relative-pose factor, as published) or ``corners`` (projected
+            tag corners; depends on distance, viewing angle and tag size).
+        tag_size: black-square edge of the printed tags, metres.
+        similarity: down-weight look-alike points (the paper's similarity analysis).
+        lazy: lazy greedy (exactly the same picks as plain greedy, far fewer evaluations).
+        seed: seed for the random and uniform baselines.
+        first_tag_id: tag id of the first placed marker; ids count up in placement order,
+            skipping ids of existing markers.
+    """
+
+    k: int = 20
+    method: str = "omp"
+    v: float = 90.0
+    marker_model: str = "paper"
+    tag_size: float = DEFAULT_TAG_SIZE
+    similarity: bool = True
+    lazy: bool = True
+    seed: int = 0
+    first_tag_id: int = 0
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory."""
+
+    discretize: DiscretizeConfig = field(default_factory=DiscretizeConfig)
+    observe: ObserveConfig = field(default_factory=ObserveConfig)
+    similarity: SimilarityConfig = field(default_factory=SimilarityConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    placement: PlacementConfig = field(default_factory=PlacementConfig)
+
+
+@dataclass(frozen=True, eq=False)
+class PlanData:
+    """Everything placement needs, computed once per scene and discretization.
+
+    Attributes:
+        disc: the discretization (poses, candidates, occupancy).
+        base_info: (N, 6, 6) information per pose from scene features only.
+        base_score: (N,) localizability score -entropy without markers.
+        coverages: one :class:`MarkerCoverage` per candidate (poses that see it and the
+            information it adds there), then one per existing marker.
+        num_candidates: C (coverages[C:] belong to existing markers).
+        timings: seconds per stage.
+    """
+
+    disc: Discretization
+    base_info: np.ndarray
+    base_score: np.ndarray
+    coverages: list
+    num_candidates: int
+    timings: dict
+
+
+def validate(config: PlanConfig) -> None:
+    """Raise :class:`UserError` for settings that cannot work."""
+    p = config.placement
+    if p.method not in METHODS:
+        raise UserError(f"--method {p.method!r} is not known: use one of {', '.join(METHODS)}")
+    if p.marker_model not in MARKER_MODELS:
+        raise UserError(f"--marker-model {p.marker_model!r} is not known: use one of {', '.join(MARKER_MODELS)}")
+    if not 0.0 <= p.v <= 100.0:
+        raise UserError(f"-v {p.v} is outside [0, 100]: give a percentage such as 90")
+    if p.k < 1:
+        raise UserError(f"-k {p.k} must be at least 1")
+    if not 0.02 <= p.tag_size <= 3.0:
+        raise UserError(f"--tag-size {p.tag_size} m is out of range: give the black-square edge in metres, e.g. 0.4")
+
+
+def _marker_info(model: str, world_from_cam: np.ndarray, world_from_marker: np.ndarray, size: float,
+                 config: PlanConfig) -> np.ndarray:
+    if model == "paper":
+        return marker_information_paper(world_from_cam, world_from_marker, config.noise)
+    return marker_information_corners(world_from_cam, world_from_marker, size, config.observe.intrinsics.K, config.noise)
+
+
+def geometric_visibility(world_from_cam: np.ndarray, world_from_markers: np.ndarray, config: PlanConfig) -> np.ndarray:
+    """(N, C) bool: range, field of view and viewing angle (no occlusion) for each marker pose."""
+    intr = config.observe.intrinsics
+    out = np.zeros((len(world_from_cam), len(world_from_markers)), dtype=bool)
+    for c, T in enumerate(world_from_markers):
+        out[:, c] = marker_visibility(world_from_cam, T, intr.K, (intr.width, intr.height), max_range=config.noise.max_range)
+    return out
+
+
+def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, sizes: Sequence[float],
+                    visible: np.ndarray, config: PlanConfig) -> list:
+    """One :class:`MarkerCoverage` per marker pose from the (N, C) visibility mask."""
+    covs = []
+    for c, T in enumerate(world_from_markers):
+        idx = np.flatnonzero(visible[:, c])
+        info = _marker_info(config.placement.marker_model, world_from_cam[idx], T, sizes[c], config) if len(idx) else np.zeros((0, 6, 6))
+        covs.append(MarkerCoverage(pose_idx=idx.astype(np.int64), info=info))
+    return covs
+
+
+def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
+            existing: Sequence[Marker] = (), progress: bool = True) -> PlanData:
+    """Run (or reuse) discretize, observe, similarity and scoring for a scene.
+
+    Args:
+        scene_spec: the scene to plan in.
+        config: all settings.
+        run_dir: directory for artifacts (created).
+        existing: markers already on the walls; they count as placed.
+        progress: progress bars on long stages.
+    """
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    scene = scene_spec.load()
+
+    t0 = time.perf_counter()
+    disc_key = cache.hash_of("discretize-v1", cache.scene_hash(scene), config.discretize)
+    disc_path = run_dir / "discretization.npz"
+    if cache.is_fresh(disc_path, disc_key):
+        disc = load_discretization(disc_path)
+        log.info("discretize: reusing %s", disc_path)
+    else:
+        disc = discretize(scene, config.discretize)
+        save_discretization(disc, disc_path)
+        cache.mark_done(disc_path, disc_key)
+    timings["discretize"] = time.perf_counter() - t0
+    N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
+    log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
+             len(disc.locations), config.discretize.num_yaws, N, C)
+
+    existing_T = np.array([m.world_from_marker for m in existing]).reshape(-1, 4, 4)
+    all_T = np.concatenate([disc.candidate_world_from_marker, existing_T])
+    sizes = [config.placement.tag_size] * C + [m.size for m in existing]
+    in_view = geometric_visibility(disc.world_from_cam, all_T, config)
+
+    t0 = time.perf_counter()
+    obs_key = cache.hash_of("observe-v1", disc_key, config.observe, all_T, sizes)
+    obs_path = run_dir / "observations.h5"
+    if cache.is_fresh(obs_path, obs_key):
+        obs = Observations.load(obs_path)
+        log.info("observe: reusing %s", obs_path)
+    else:
+        log.info("observe: rendering and extracting SIFT at %d poses", N)
+        obs = observe(scene_spec, disc.world_from_cam, in_view, all_T, float(max(sizes)), config.observe, progress=progress)
+        obs.save(obs_path)
+        cache.mark_done(obs_path, obs_key)
+    timings["observe"] = time.perf_counter() - t0
+    log.info("observe: %d features with 3D points (%.0f per pose)", len(obs.pose_index), len(obs.pose_index) / max(N, 1))
+
+    t0 = time.perf_counter()
+    if config.placement.similarity:
+        sim_key = cache.hash_of("similarity-v1", obs_key, config.similarity)
+        sim_path = run_dir / "similarity.npz"
+        if cache.is_fresh(sim_path, sim_key):
+            n_similar = np.load(sim_path)["n_similar"]
+            log.info("similarity: reusing %s", sim_path)
+        else:
+            n_similar = count_similar(obs.descriptors, obs.points_world, config.similarity)
+            from .io_utils import write_npz
+
+            write_npz(sim_path, n_similar=n_similar)
+            cache.mark_done(sim_path, sim_key)
+    else:
+        n_similar = np.zeros(len(obs.pose_index), dtype=np.int32)
+    timings["similarity"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    K = config.observe.intrinsics.K
+    base_info = pose_information(disc.world_from_cam, K, obs.points_world.astype(float), obs.pose_index,
+                                 n_similar, config.noise)
+    base_score = -entropy(base_info)
+    visible = in_view & obs.candidate_unoccluded
+    coverages = build_coverages(disc.world_from_cam, all_T, sizes, visible, config)
+    timings["score"] = time.perf_counter() - t0
+    return PlanData(disc, base_info, base_score, coverages, C, timings)
+
+
+@dataclass(frozen=True, eq=False)
+class Placement:
+    """A chosen set of markers.
+
+    Attributes:
+        candidates: (k,) candidate indices in placement order.
+        gains: (k,) localizability gain of each pick when it was chosen (OMP; NaN otherwise).
+        markers: the markers, with tag ids.
+        info_after: (N, 6, 6) information per pose with existing + placed markers.
+        q: OMP percentile used (NaN for baselines).
+    """
+
+    candidates: np.ndarray
+    gains: np.ndarray
+    markers: list
+    info_after: np.ndarray
+    q: float
+
+
+def _apply(info: np.ndarray, coverages: Sequence) -> np.ndarray:
+    out = info.copy()
+    for cov in coverages:
+        np.add.at(out, cov.pose_idx, cov.info)
+    return out
+
+
+def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
+    """Choose ``config.k`` markers among the candidates with the configured method."""
+    C = data.num_candidates
+    if config.k > C:
+        raise UserError(f"-k {config.k} is larger than the {C} candidate marker poses found: lower -k or reduce --marker-spacing")
+    existing_covs = data.coverages[C:]
+    candidate_covs = data.coverages[:C]
+    if config.method == "omp":
+        res = omp_greedy(data.base_info, candidate_covs, config.k, v=config.v, lazy=config.lazy, existing=existing_covs)
+        order, gains, q = np.asarray(res.order), np.asarray(res.gains, dtype=float), float(res.q)
+        info_after = res.info_after
+    else:
+        if config.method == "random":
+            order = np.asarray(random_placement(C, config.k, config.seed))
+        else:
+            order = np.asarray(uniform_placement(data.disc.perimeter_arclength, data.disc.perimeter_length, config.k, seed=config.seed))
+        gains, q = np.full(len(order), np.nan), float("nan")
+        info_after = _apply(data.base_info, list(existing_covs) + [candidate_covs[i] for i in order])
+    used = {m.tag_id for m in existing}
+    markers, tag_id = [], config.first_tag_id
+    for c in order:
+        while tag_id in used:
+            tag_id += 1
+        markers.append(Marker(tag_id, config.tag_size, data.disc.candidate_world_from_marker[c].copy(), FAMILY))
+        used.add(tag_id)
+    return Placement(order.astype(np.int64), gains, markers, info_after, q)
+
+
+def first_pick_gain(data: PlanData, placement: Placement, existing_info: np.ndarray) -> np.ndarray:
+    """(N,) information gain of the first placed marker at every pose (0 where not seen)."""
+    gain = np.zeros(len(data.base_info))
+    if len(placement.candidates):
+        cov = data.coverages[int(placement.candidates[0])]
+        if len(cov.pose_idx):
+            gain[cov.pose_idx] = information_gain(existing_info[cov.pose_idx], cov.info)
+    return gain

@@ -1,0 +1,102 @@
+"""Files a plan run leaves for its user: placement.json/.csv, scores.npz, figures, config.json."""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..cache import config_dict
+from ..io_utils import atomic_path, write_json, write_npz
+from ..localizability import entropy
+from .figures import floor_map, per_location_mean
+
+log = logging.getLogger(__name__)
+
+CSV_COLUMNS = ["order", "tag_id", "family", "size_m", "x", "y", "z", "normal_x", "normal_y", "normal_z", "yaw_deg", "gain"]
+
+
+def placement_records(placement, method: str) -> list[dict]:
+    """One JSON-ready dict per placed marker, in placement order."""
+    rows = []
+    for i, (m, c, g) in enumerate(zip(placement.markers, placement.candidates, placement.gains)):
+        n = m.normal
+        rows.append({
+            "order": i + 1,
+            "tag_id": int(m.tag_id),
+            "family": m.family,
+            "size": float(m.size),
+            "position": [round(float(v), 4) for v in m.position],
+            "normal": [round(float(v), 4) for v in n],
+            "yaw_deg": round(float(np.degrees(np.arctan2(n[1], n[0]))), 2),
+            "world_from_marker": np.round(m.world_from_marker, 6).tolist(),
+            "gain": None if not np.isfinite(g) else float(g),
+            "candidate_index": int(c),
+            "method": method,
+        })
+    return rows
+
+
+def write_placement(out_dir: Path, placement, method: str, scene_source: str, extra: dict) -> None:
+    """placement.json (markers + summary) and placement.csv (one row per marker)."""
+    records = placement_records(placement, method)
+    write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": records})
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    writer.writerow(CSV_COLUMNS)
+    for r in records:
+        writer.writerow([r["order"], r["tag_id"], r["family"], r["size"], *r["position"], *r["normal"], r["yaw_deg"],
+                         "" if r["gain"] is None else f"{r['gain']:.6g}"])
+    with atomic_path(out_dir / "placement.csv") as tmp:
+        tmp.write_text(buf.getvalue())
+
+
+def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
+                       scene_source: str, existing: Sequence = ()) -> dict:
+    """Write every output of a plan run and return a summary dict (also in placement.json)."""
+    out_dir = Path(out_dir)
+    disc = data.disc
+    score_after = -entropy(placement.info_after)
+    L = len(disc.locations)
+    loc_before = per_location_mean(data.base_score, disc.location_index, L)
+    loc_after = per_location_mean(score_after, disc.location_index, L)
+    loc_gain = per_location_mean(first_gain, disc.location_index, L)
+    summary = {
+        "num_poses": int(len(disc.world_from_cam)),
+        "num_locations": int(L),
+        "num_candidates": int(data.num_candidates),
+        "q": None if not np.isfinite(placement.q) else float(placement.q),
+        "mean_score_before": float(data.base_score.mean()),
+        "mean_score_after": float(score_after.mean()),
+        "p10_score_before": float(np.percentile(data.base_score, 10)),
+        "p10_score_after": float(np.percentile(score_after, 10)),
+    }
+    write_placement(out_dir, placement, method, scene_source, {"summary": summary})
+    write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
+              locations=disc.locations, score_before=data.base_score, score_after=score_after,
+              first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
+    write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config)})
+
+    grid = dict(occupancy=disc.occupancy, origin=disc.grid_origin, resolution=disc.grid_resolution, locations=disc.locations)
+    floor_map(out_dir / "scores.png", **grid, values=loc_before, cmap="gray",
+              title="Localizability score, no markers (dark = low)", colorbar_label="mean score -H over yaws",
+              candidates_xy=disc.candidate_position[:, :2])
+    if len(placement.markers):
+        first = placement.markers[0]
+        floor_map(out_dir / "gain_first.png", **grid, values=loc_gain, cmap="gray_r",
+                  title="Information gain of the first marker (dark = high)", colorbar_label="mean gain (nats)",
+                  markers_xy=first.position[None, :2], markers_normal=first.normal[None, :2], marker_labels=["1"])
+    pos = np.array([m.position[:2] for m in placement.markers]).reshape(-1, 2)
+    nrm = np.array([m.normal[:2] for m in placement.markers]).reshape(-1, 2)
+    ex_pos = np.array([m.position[:2] for m in existing]).reshape(-1, 2)
+    ex_nrm = np.array([m.normal[:2] for m in existing]).reshape(-1, 2)
+    labels = [str(i + 1) for i in range(len(pos))] + ["e"] * len(ex_pos)
+    floor_map(out_dir / "placement.png", **grid, values=loc_after, cmap="gray",
+              title=f"{method}: {len(pos)} markers (numbers = order), score after placement",
+              colorbar_label="mean score -H over yaws",
+              markers_xy=np.concatenate([pos, ex_pos]), markers_normal=np.concatenate([nrm, ex_nrm]), marker_labels=labels)
+    return summary
