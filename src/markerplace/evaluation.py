@@ -1,0 +1,257 @@
+"""Evaluation maths of the simulation testbed: test poses, pose errors and recall.
+
+Test poses (paper, Sec. "The map and test data"; DESIGN.md section 4)
+--------------------------------------------------------------------
+A test pose is a feasible camera pose (the map poses of the planner's discretization), drawn
+either ``uniform`` or ``weighted`` towards low localizability scores with the paper's weights
+
+    w(c) = 2 l* - mean(l) - l(c)      (l = score without markers, l* = max l)
+
+and then perturbed: x, y += U(-0.5, 0.5) * grid_spacing, yaw += U(-0.5, 0.5) * 45 deg (height,
+pitch and roll unchanged). A perturbed pose is kept only where the camera is in free space
+(occupancy cell free and clearance above ``min_clearance``); rejected draws are redrawn. All
+randomness comes from ``numpy.random.default_rng(seed)``: the same seed gives the same poses, so
+every placement method is evaluated on identical test images.
+
+Recall
+------
+``recall = #{queries with t_err <= t_max and r_err <= r_max} / #queries``. Thresholds are
+INCLUSIVE (an error exactly at the threshold counts as a hit). A query that failed to localize
+has errors ``inf`` (or NaN) and always counts as a miss; it stays in the denominator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .errors import UserError
+from .geometry import world_from_cam_poses
+from .io_utils import write_npz
+
+TEST_SETS = ("weighted", "uniform")
+
+#: Recall thresholds (translation metres, rotation degrees); the paper's main one is (0.05, 5).
+THRESHOLDS: tuple[tuple[float, float], ...] = ((0.01, 1.0), (0.05, 5.0), (0.10, 10.0), (1.0, 30.0))
+MAIN_THRESHOLD: tuple[float, float] = (0.05, 5.0)
+
+
+@dataclass(frozen=True)
+class TestPoseConfig:
+    """How test poses are drawn.
+
+    Attributes:
+        num: number of test poses N (paper: 200 for the room, 2000 for the office).
+        mode: ``weighted`` (towards low scores, the paper's default) or ``uniform``.
+        xy_jitter: x and y are perturbed by U(-0.5, 0.5) * xy_jitter * grid_spacing.
+        yaw_jitter_deg: yaw is perturbed by U(-0.5, 0.5) * yaw_jitter_deg degrees (paper: 45).
+        min_clearance: a perturbed camera must be at least this far (metres) from any non-free
+            occupancy cell.
+        seed: seed of ``numpy.random.default_rng``.
+        max_rounds: give up (UserError) after this many rounds of redrawing.
+    """
+
+    __test__ = False  # not a pytest class
+
+    num: int = 200
+    mode: str = "weighted"
+    xy_jitter: float = 1.0
+    yaw_jitter_deg: float = 45.0
+    min_clearance: float = 0.1
+    seed: int = 0
+    max_rounds: int = 100
+
+
+@dataclass(frozen=True, eq=False)
+class TestPoses:
+    """Perturbed test camera poses.
+
+    Attributes:
+        world_from_cam: (N, 4, 4) camera poses (OpenCV camera frame, world z up, metres).
+        source_index: (N,) index of the feasible pose each one was drawn from.
+        offset_xy: (N, 2) applied translation perturbation, metres.
+        offset_yaw: (N,) applied yaw perturbation, radians.
+    """
+
+    __test__ = False
+
+    world_from_cam: np.ndarray
+    source_index: np.ndarray
+    offset_xy: np.ndarray
+    offset_yaw: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.world_from_cam)
+
+    def save(self, path: str | Path) -> None:
+        """Write as ``.npz`` atomically."""
+        write_npz(path, world_from_cam=self.world_from_cam, source_index=self.source_index,
+                  offset_xy=self.offset_xy, offset_yaw=self.offset_yaw)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "TestPoses":
+        with np.load(path, allow_pickle=False) as f:
+            return cls(f["world_from_cam"], f["source_index"], f["offset_xy"], f["offset_yaw"])
+
+
+def test_pose_weights(scores: np.ndarray) -> np.ndarray:
+    """The paper's sampling weights ``w = 2 l* - mean(l) - l`` for (N,) scores l -> (N,) >= 0.
+
+    The weight of the best pose is ``l* - mean(l) >= 0``; lower scores get larger weights. When
+    every score is equal all weights are 0; :func:`sampling_probabilities` then falls back to
+    uniform.
+    """
+    scores = np.asarray(scores, dtype=float)
+    if scores.ndim != 1 or len(scores) == 0:
+        raise ValueError("scores must be a non-empty 1-D array")
+    w = 2.0 * scores.max() - scores.mean() - scores
+    return np.maximum(w, 0.0)  # clip -1e-15 rounding noise
+
+
+test_pose_weights.__test__ = False  # type: ignore[attr-defined]
+
+
+def sampling_probabilities(scores: np.ndarray, mode: str) -> np.ndarray:
+    """(N,) probabilities of drawing each feasible pose for ``mode`` in :data:`TEST_SETS`."""
+    if mode not in TEST_SETS:
+        raise UserError(f"test set {mode!r} is not known: use one of {', '.join(TEST_SETS)}")
+    n = len(scores)
+    if mode == "uniform":
+        return np.full(n, 1.0 / n)
+    w = test_pose_weights(scores)
+    total = w.sum()
+    return w / total if total > 0 else np.full(n, 1.0 / n)
+
+
+def free_space_checker(occupancy: np.ndarray, origin: Sequence[float], resolution: float,
+                       min_clearance: float) -> Callable[[np.ndarray], np.ndarray]:
+    """A function (M, 2) world xy (metres) -> (M,) bool: "free with enough clearance".
+
+    Args:
+        occupancy: (H, W) grid, 0 free, 1 occupied, -1 unknown; row 0 at ``origin`` y, column 0
+            at ``origin`` x (the discretization's grid).
+        origin: (x0, y0) world metres of the grid's lower-left corner.
+        resolution: cell size, metres.
+        min_clearance: required distance (metres) from the cell centre to the nearest
+            non-free (occupied or unknown) cell centre.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    free = np.asarray(occupancy) == 0
+    clearance = distance_transform_edt(free) * float(resolution)  # 0 on non-free cells
+    x0, y0 = float(origin[0]), float(origin[1])
+    H, W = free.shape
+
+    def check(xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        col = np.floor((xy[:, 0] - x0) / resolution).astype(int)
+        row = np.floor((xy[:, 1] - y0) / resolution).astype(int)
+        inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+        ok = np.zeros(len(xy), dtype=bool)
+        ok[inside] = free[row[inside], col[inside]] & (clearance[row[inside], col[inside]] > min_clearance)
+        return ok
+
+    return check
+
+
+def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spacing: float,
+                      config: TestPoseConfig, is_free: Callable[[np.ndarray], np.ndarray]) -> TestPoses:
+    """Draw ``config.num`` perturbed test poses from the feasible poses.
+
+    Args:
+        world_from_cam: (N, 4, 4) feasible (map) poses, level cameras.
+        scores: (N,) localizability score of each pose without markers (used by ``weighted``).
+        grid_spacing: camera grid spacing, metres (scale of the xy perturbation).
+        config: number, mode, perturbation and seed.
+        is_free: (M, 2) world xy -> (M,) bool, e.g. from :func:`free_space_checker`.
+
+    Returns:
+        :class:`TestPoses` with exactly ``config.num`` poses, in draw order.
+    """
+    if config.num < 1:
+        raise UserError(f"--tests {config.num} must be at least 1")
+    world_from_cam = np.asarray(world_from_cam, dtype=float)
+    if len(world_from_cam) == 0:
+        raise UserError("no feasible camera poses to draw test poses from: check --height and --grid-spacing")
+    probs = sampling_probabilities(np.asarray(scores, dtype=float), config.mode)
+    rng = np.random.default_rng(config.seed)
+    yaws = np.arctan2(world_from_cam[:, 1, 2], world_from_cam[:, 0, 2])
+    kept_idx, kept_dxy, kept_dyaw = [], [], []
+    need = config.num
+    for _ in range(config.max_rounds):
+        batch = max(2 * need, 16)
+        idx = rng.choice(len(world_from_cam), size=batch, p=probs)
+        dxy = rng.uniform(-0.5, 0.5, size=(batch, 2)) * config.xy_jitter * grid_spacing
+        dyaw = np.radians(rng.uniform(-0.5, 0.5, size=batch) * config.yaw_jitter_deg)
+        ok = is_free(world_from_cam[idx, :2, 3] + dxy)
+        take = np.flatnonzero(ok)[:need]
+        kept_idx.append(idx[take])
+        kept_dxy.append(dxy[take])
+        kept_dyaw.append(dyaw[take])
+        need -= len(take)
+        if need == 0:
+            break
+    else:
+        raise UserError(f"could only place {config.num - need} of {config.num} test poses in free space: "
+                        "lower --tests or check the scene's free space")
+    idx = np.concatenate(kept_idx)
+    dxy = np.concatenate(kept_dxy)
+    dyaw = np.concatenate(kept_dyaw)
+    positions = world_from_cam[idx, :3, 3].copy()
+    positions[:, :2] += dxy
+    poses = world_from_cam_poses(positions, yaws[idx] + dyaw)
+    return TestPoses(poses, idx.astype(np.int64), dxy, dyaw)
+
+
+def pose_errors_batch(est_world_from_cam: np.ndarray, true_world_from_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (metres) and rotation (degrees) errors, the paper's delta_t and delta_R.
+
+    Args:
+        est_world_from_cam: (N, 4, 4) estimates; a failed query is all-NaN.
+        true_world_from_cam: (N, 4, 4) ground truth.
+
+    Returns:
+        (N,) ``||t_est - t_true||`` and (N,) ``arccos((tr(R_est^T R_true) - 1) / 2)`` in degrees;
+        ``inf`` for failed queries.
+    """
+    est = np.asarray(est_world_from_cam, dtype=float)
+    true = np.asarray(true_world_from_cam, dtype=float)
+    failed = ~np.isfinite(est).all(axis=(1, 2))
+    t_err = np.linalg.norm(est[:, :3, 3] - true[:, :3, 3], axis=1)
+    tr = np.einsum("nij,nij->n", est[:, :3, :3], true[:, :3, :3])  # trace(R_est^T R_true)
+    r_err = np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0)))
+    t_err[failed] = np.inf
+    r_err[failed] = np.inf
+    return t_err, r_err
+
+
+def recall(t_err: np.ndarray, r_err: np.ndarray, t_max: float, r_max: float) -> float:
+    """Fraction in [0, 1] of queries with ``t_err <= t_max`` AND ``r_err <= r_max`` (inclusive).
+
+    Failures (``inf`` or NaN errors) count as misses. Empty input gives NaN.
+    """
+    t_err = np.asarray(t_err, dtype=float)
+    r_err = np.asarray(r_err, dtype=float)
+    if t_err.shape != r_err.shape:
+        raise ValueError("t_err and r_err must have the same shape")
+    if t_err.size == 0:
+        return float("nan")
+    with np.errstate(invalid="ignore"):
+        hit = (t_err <= t_max) & (r_err <= r_max)  # NaN compares False -> miss
+    return float(hit.mean())
+
+
+def recalls(t_err: np.ndarray, r_err: np.ndarray,
+            thresholds: Sequence[tuple[float, float]] = THRESHOLDS) -> list[float]:
+    """:func:`recall` at each (t_max metres, r_max degrees) threshold."""
+    return [recall(t_err, r_err, t, r) for t, r in thresholds]
+
+
+def threshold_label(threshold: tuple[float, float]) -> str:
+    """Human label like ``5cm/5deg`` or ``1m/30deg`` for a (metres, degrees) threshold."""
+    t, r = threshold
+    dist = f"{t * 100:g}cm" if t < 1.0 else f"{t:g}m"
+    return f"{dist}/{r:g}deg"
