@@ -1,0 +1,196 @@
+"""Localize a query image against a :class:`MapDatabase` (the paper's Fig. 8).
+
+Pipeline for one query RGB image:
+
+1. Tags (``use_tags``): detect tag36h11 tags. For each detected tag whose pose is known, the
+   tag implies a coarse camera pose (IPPE square). Candidates, each group ranked by VLAD
+   similarity: (a) map images that saw one of the detected tags AND lie near an implied pose
+   (camera centres within ``tag_pose_radius_m``, optical axes within ``tag_pose_angle_deg``);
+   (b) map poses near an implied pose (whether or not they saw the tag); (c) the other map
+   images that saw a detected tag. At most ``num_candidates`` in total.
+2. Fill up to ``num_candidates`` with VLAD nearest neighbours.
+3. SIFT matching (query: OpenCV default SIFT) against each candidate, brute-force L2 kNN (k=2)
+   with Lowe's ratio test; 2D-3D correspondences pooled over candidates, keeping for each query
+   keypoint the match with the smallest descriptor distance.
+4. ``tag_corners``: add the detected tags' 4 corners with their known 3D corners.
+5. P3P RANSAC + LM (:func:`estimate_pose`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .database import MapDatabase
+from .features import SIFT_DEFAULT, SiftConfig, extract_sift
+from .pnp import PnPConfig, estimate_pose
+from .tags import TagDetection, detect_tags, pose_from_tag
+from .vlad import nearest
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """Localization parameters (paper / DESIGN.md section 4 defaults).
+
+    Attributes:
+        num_candidates: map images retrieved per query (paper: 10).
+        ratio: Lowe's ratio test threshold (paper: 0.8).
+        use_tags: use tag detection for retrieval (the paper's "marker detection").
+        tag_corners: also use detected tag corners as 2D-3D correspondences (off in the paper).
+        tag_pose_radius_m: map poses within this distance of a tag-implied pose are candidates.
+        tag_pose_angle_deg: ... and whose optical axis is within this angle of it.
+        sift: query-side SIFT parameters (OpenCV defaults).
+        pnp: RANSAC/refinement parameters.
+        seed: seed of the RANSAC RNG.
+    """
+
+    num_candidates: int = 10
+    ratio: float = 0.8
+    use_tags: bool = True
+    tag_corners: bool = False
+    tag_pose_radius_m: float = 2.0
+    tag_pose_angle_deg: float = 60.0
+    sift: SiftConfig = SIFT_DEFAULT
+    pnp: PnPConfig = field(default_factory=PnPConfig)
+    seed: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class LocalizationResult:
+    """Outcome of :meth:`Localizer.localize`.
+
+    Attributes:
+        world_from_cam: (4, 4) estimated pose or None (failure).
+        num_inliers: PnP inliers (0 on failure before RANSAC).
+        candidates: retrieved map image indices, in matching order.
+        detected_tag_ids: ids of tags detected in the query (empty if tags are off).
+        num_matches: pooled 2D-3D correspondences given to PnP.
+        timing: seconds per stage (``features``, ``tags``, ``retrieval``, ``matching``, ``pnp``, ``total``).
+    """
+
+    world_from_cam: np.ndarray | None
+    num_inliers: int
+    candidates: list[int]
+    detected_tag_ids: list[int]
+    num_matches: int
+    timing: dict[str, float]
+
+    @property
+    def success(self) -> bool:
+        return self.world_from_cam is not None
+
+
+class Localizer:
+    """Localizes query images of intrinsics ``K`` (3, 3) against ``db``."""
+
+    def __init__(self, db: MapDatabase, K: np.ndarray, config: LocalizerConfig = LocalizerConfig()):
+        self.db = db
+        self.K = np.asarray(K, dtype=np.float64)
+        self.config = config
+        self._matcher = cv2.BFMatcher(cv2.NORM_L2)
+        self._centres = db.poses[:, :3, 3] if len(db) else np.zeros((0, 3))
+        self._axes = db.poses[:, :3, 2] if len(db) else np.zeros((0, 3))
+
+    # ---- retrieval -------------------------------------------------------------------------
+    def _near(self, world_from_cam: np.ndarray) -> np.ndarray:
+        """(M,) bool: map poses near ``world_from_cam`` (radius and optical-axis angle)."""
+        c = self.config
+        close = np.linalg.norm(self._centres - world_from_cam[:3, 3], axis=1) <= c.tag_pose_radius_m
+        cosang = self._axes @ world_from_cam[:3, 2]
+        return close & (cosang >= np.cos(np.radians(c.tag_pose_angle_deg)))
+
+    def retrieve(self, query_vlad: np.ndarray, tags: list[TagDetection]) -> list[int]:
+        """Candidate map image indices (tag-based first, then VLAD), at most ``num_candidates``."""
+        n = self.config.num_candidates
+        if len(self.db) == 0 or n <= 0:
+            return []
+        sims = self.db.vlad @ query_vlad
+        out: list[int] = []
+        if tags:
+            saw = np.zeros(len(self.db), bool)
+            near = np.zeros(len(self.db), bool)
+            for det in tags:
+                saw[self.db.tag_index.get(det.tag_id, [])] = True
+                marker = self.db.markers.get(det.tag_id)
+                if marker is not None:
+                    try:
+                        near |= self._near(pose_from_tag(det, marker, self.K))
+                    except (RuntimeError, cv2.error) as exc:  # degenerate corners
+                        log.debug("pose_from_tag failed for tag %d: %s", det.tag_id, exc)
+            for group in (saw & near, near & ~saw, saw & ~near):
+                idx = np.flatnonzero(group)
+                out.extend(int(i) for i in idx[np.argsort(-sims[idx], kind="stable")])
+            out = out[:n]
+        if len(out) < n:
+            taken = set(out)
+            order, _ = nearest(self.db.vlad, query_vlad, n + len(out))
+            out.extend(int(i) for i in order if int(i) not in taken)
+            out = out[:n]
+        return out
+
+    # ---- matching --------------------------------------------------------------------------
+    def match(self, descriptors: np.ndarray, candidates: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Pooled matches: (L,) query keypoint indices and (L, 3) world points (best per keypoint)."""
+        nq = len(descriptors)
+        best_dist = np.full(nq, np.inf, np.float32)
+        best_pt = np.full((nq, 3), np.nan)
+        if nq < 2:
+            return np.zeros(0, np.int64), np.zeros((0, 3))
+        for i in candidates:
+            _, desc, pts = self.db.features(i)
+            if len(desc) < 2:
+                continue
+            for pair in self._matcher.knnMatch(descriptors, desc, k=2):
+                if len(pair) < 2:
+                    continue
+                m, m2 = pair
+                if m.distance < self.config.ratio * m2.distance and m.distance < best_dist[m.queryIdx]:
+                    best_dist[m.queryIdx] = m.distance
+                    best_pt[m.queryIdx] = pts[m.trainIdx]
+        q = np.flatnonzero(np.isfinite(best_dist))
+        return q.astype(np.int64), best_pt[q]
+
+    # ---- full pipeline ---------------------------------------------------------------------
+    def localize(self, rgb: np.ndarray) -> LocalizationResult:
+        """Estimate the ``world_from_cam`` of an (H, W, 3) uint8 RGB query image."""
+        c = self.config
+        timing: dict[str, float] = {}
+        t0 = time.perf_counter()
+        kp, desc = extract_sift(rgb, c.sift)
+        t1 = time.perf_counter()
+        timing["features"] = t1 - t0
+        tags = detect_tags(rgb) if (c.use_tags or c.tag_corners) else []
+        t2 = time.perf_counter()
+        timing["tags"] = t2 - t1
+        qv = self.db.codebook.vlad(desc)
+        candidates = self.retrieve(qv, tags if c.use_tags else [])
+        t3 = time.perf_counter()
+        timing["retrieval"] = t3 - t2
+        qidx, pts = self.match(desc, candidates)
+        px = kp[qidx].astype(np.float64)
+        if c.tag_corners:
+            for det in tags:
+                marker = self.db.markers.get(det.tag_id)
+                if marker is not None:
+                    pts = np.concatenate([pts, marker.corners_world()])
+                    px = np.concatenate([px, det.corners])
+        t4 = time.perf_counter()
+        timing["matching"] = t4 - t3
+        est = estimate_pose(pts, px, self.K, c.pnp, seed=c.seed)
+        t5 = time.perf_counter()
+        timing["pnp"] = t5 - t4
+        timing["total"] = t5 - t0
+        return LocalizationResult(
+            world_from_cam=est.world_from_cam,
+            num_inliers=est.num_inliers,
+            candidates=candidates,
+            detected_tag_ids=[d.tag_id for d in tags],
+            num_matches=int(len(pts)),
+            timing=timing,
+        )

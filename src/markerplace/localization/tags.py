@@ -1,0 +1,117 @@
+"""AprilTag (tag36h11) detection with pupil-apriltags, and the camera pose a tag implies.
+
+Corner convention. pupil-apriltags returns corners counter-clockwise in the image starting at
+the tag's top-right corner (TR, TL, BL, BR as seen by a facing viewer) in a pixel convention
+where pixel centres sit at +0.5. Verified empirically on tags from
+``cv2.aruco.generateImageMarker(DICT_APRILTAG_36h11, ...)`` (also rotated/warped; see
+tests/test_localization_pnp.py). :func:`detect_tags` reorders to TL, TR, BR, BL (the order of
+:func:`markerplace.geometry.marker_corners_local`) and shifts by -0.5 px to OpenCV's convention
+(pixel centres at integers).
+
+Detector settings: ``quad_decimate=1.0`` (full resolution). At 600x450 a 0.4 m tag 8-10 m away
+spans only ~12-15 px; decimation by 2 loses those far tags, and full resolution costs only a few
+milliseconds per image. ``nthreads=1`` (parallelism is across images, by processes).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..geometry import invert, marker_corners_local
+from ..markers import FAMILY, Marker
+from .features import to_gray
+
+log = logging.getLogger(__name__)
+
+QUAD_DECIMATE = 1.0
+_PUPIL_TO_TLTRBRBL = [1, 0, 3, 2]
+_PUPIL_PIXEL_OFFSET = 0.5
+
+_DETECTORS: dict[int, object] = {}
+
+
+@dataclass(frozen=True, eq=False)
+class TagDetection:
+    """One detected tag.
+
+    Attributes:
+        tag_id: tag36h11 id.
+        corners: (4, 2) float64 pixel ``(x, y)``, order TL, TR, BR, BL as seen by a facing viewer.
+        center: (2,) pixel ``(x, y)`` of the tag centre.
+        decision_margin: detector's decoding margin (higher is more reliable).
+        hamming: number of corrected bits.
+    """
+
+    tag_id: int
+    corners: np.ndarray
+    center: np.ndarray
+    decision_margin: float = 0.0
+    hamming: int = 0
+
+
+def _detector():
+    """One pupil-apriltags detector per process."""
+    pid = os.getpid()
+    det = _DETECTORS.get(pid)
+    if det is None:
+        import pupil_apriltags
+
+        det = pupil_apriltags.Detector(
+            families=FAMILY,
+            nthreads=1,
+            quad_decimate=QUAD_DECIMATE,
+            quad_sigma=0.0,
+            refine_edges=1,
+            decode_sharpening=0.25,
+        )
+        _DETECTORS[pid] = det
+    return det
+
+
+def detect_tags(image: np.ndarray, max_hamming: int = 1) -> list[TagDetection]:
+    """Detect tag36h11 tags in an (H, W, 3) RGB or (H, W) gray uint8 image.
+
+    Detections with more than ``max_hamming`` corrected bits are dropped. If an id is detected
+    more than once, only the detection with the largest decision margin is kept.
+    Returns detections sorted by tag id.
+    """
+    gray = to_gray(image)
+    best: dict[int, TagDetection] = {}
+    for r in _detector().detect(gray):
+        if r.hamming > max_hamming:
+            continue
+        det = TagDetection(
+            tag_id=int(r.tag_id),
+            corners=np.asarray(r.corners, dtype=np.float64)[_PUPIL_TO_TLTRBRBL] - _PUPIL_PIXEL_OFFSET,
+            center=np.asarray(r.center, dtype=np.float64) - _PUPIL_PIXEL_OFFSET,
+            decision_margin=float(r.decision_margin),
+            hamming=int(r.hamming),
+        )
+        prev = best.get(det.tag_id)
+        if prev is None or det.decision_margin > prev.decision_margin:
+            best[det.tag_id] = det
+    return [best[k] for k in sorted(best)]
+
+
+def pose_from_tag(detection: TagDetection, marker: Marker, K: np.ndarray) -> np.ndarray:
+    """(4, 4) ``world_from_cam`` implied by one tag detection (IPPE square on its 4 corners).
+
+    Args:
+        detection: corners in TL, TR, BR, BL order (pixels).
+        marker: the tag's known pose and size.
+        K: (3, 3) camera matrix.
+    """
+    obj = marker_corners_local(marker.size).astype(np.float64)
+    img = np.asarray(detection.corners, dtype=np.float64).reshape(4, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj.reshape(4, 1, 3), img, np.asarray(K, float), None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        raise RuntimeError("solvePnP(IPPE_SQUARE) failed on a tag detection")
+    cam_from_marker = np.eye(4)
+    cam_from_marker[:3, :3] = cv2.Rodrigues(rvec)[0]
+    cam_from_marker[:3, 3] = tvec.reshape(3)
+    return np.asarray(marker.world_from_marker, float) @ invert(cam_from_marker)
