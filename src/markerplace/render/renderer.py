@@ -1,0 +1,387 @@
+"""Offscreen OpenGL renderer (moderngl on EGL): RGB, planar depth and world normals of a scene.
+
+Camera model: OpenCV pinhole (x right, y down, z forward), poses are 4x4 ``world_from_cam``,
+pixel centres at integer coordinates. A world point renders at the pixel
+:func:`markerplace.geometry.project` gives; image row 0 is the top. Depth is the camera-frame z
+of the surface (metres, written to a float32 attachment, not recovered from the depth buffer),
+0 where nothing was hit. Normals are unit world-frame surface normals flipped to face the camera,
+0 where nothing was hit.
+
+Scene upload: parts are grouped by texture object (parts sharing one texture array share one
+GL texture and one vertex buffer); base colour and vertex colour are baked into a per-vertex
+colour; meshes are de-indexed so parts without normals get exact flat face normals. Markers are
+extra textured quads (tag image with white quiet zone, nearest-neighbour magnification) lifted
+``MARKER_OFFSET`` metres off the wall along their normal; :meth:`Renderer.set_markers` replaces
+them without touching the scene buffers.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Sequence
+
+import numpy as np
+
+from ..errors import UserError
+from ..geometry import Intrinsics, invert
+from ..markers import Marker
+from ..scene.types import MeshPart, Scene
+from . import shaders
+from .tags import outer_size, tag_image
+
+log = logging.getLogger(__name__)
+
+NEAR = 0.05
+"""Near clipping distance, metres."""
+FAR = 100.0
+"""Far clipping distance, metres."""
+MARKER_OFFSET = 0.004
+"""Distance (metres) a marker quad floats in front of its wall, along the marker normal."""
+TAG_PIXELS_PER_BIT = 16
+"""Texture resolution of marker images."""
+EGL_HINT = "install libegl1 libegl-mesa0 libgl1-mesa-dri, or run `make setup`"
+
+# Interleaved vertex layout: pos 3f, normal 3f, uv 2f, colour 4 x u8 (normalized).
+_VERTEX_DTYPE = np.dtype(
+    [("pos", "<f4", 3), ("normal", "<f4", 3), ("uv", "<f4", 2), ("color", "u1", 4)]
+)
+_ATTRS = (("in_pos", "3f", 12), ("in_normal", "3f", 12), ("in_uv", "2f", 8), ("in_color", "4f1", 4))
+
+
+@dataclass(frozen=True, eq=False)
+class RenderResult:
+    """One rendered view.
+
+    Attributes:
+        rgb: (H, W, 3) uint8 colour image, row 0 = top; None if not requested.
+        depth: (H, W) float32 planar depth (camera z) in metres, 0 where nothing was hit; None if
+            not requested.
+        normal: (H, W, 3) float32 unit world-frame normals facing the camera, 0 where nothing was
+            hit; None if not requested.
+        world_from_cam: (4, 4) pose the view was rendered from.
+    """
+
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    normal: np.ndarray | None
+    world_from_cam: np.ndarray
+
+
+def projection_matrix(intrinsics: Intrinsics, near: float = NEAR, far: float = FAR) -> np.ndarray:
+    """(4, 4) clip-from-camera matrix for OpenCV intrinsics (camera x right, y down, z forward).
+
+    Image pixel u (centre at integer u) covers GL window x in [u, u + 1], so
+    x_ndc = 2 (u + 0.5) / W - 1. Likewise image row v maps to GL window row v (not flipped), so
+    ``fbo.read`` returns image row 0 first. Depth: z = near -> -1, z = far -> +1, w = z.
+    """
+    W, H = intrinsics.width, intrinsics.height
+    P = np.zeros((4, 4))
+    P[0, 0] = 2.0 * intrinsics.fx / W
+    P[0, 2] = 2.0 * (intrinsics.cx + 0.5) / W - 1.0
+    P[1, 1] = 2.0 * intrinsics.fy / H
+    P[1, 2] = 2.0 * (intrinsics.cy + 0.5) / H - 1.0
+    P[2, 2] = (far + near) / (far - near)
+    P[2, 3] = -2.0 * far * near / (far - near)
+    P[3, 2] = 1.0
+    return P
+
+
+def create_context():
+    """Standalone moderngl context on EGL. Raises :class:`UserError` with an install hint if it fails."""
+    try:
+        import moderngl
+
+        return moderngl.create_standalone_context(backend="egl")
+    except Exception as exc:  # missing libEGL, no driver, ...
+        raise UserError(f"cannot create an OpenGL context on EGL ({exc.__class__.__name__}: {exc}): {EGL_HINT}") from exc
+
+
+def _triangles(part: MeshPart) -> np.ndarray:
+    """De-indexed (3 M,) vertex records of one part (see ``_VERTEX_DTYPE``)."""
+    faces = np.asarray(part.faces, dtype=np.int64)
+    verts = np.asarray(part.vertices, dtype=np.float64)
+    corner = faces.reshape(-1)
+    out = np.zeros(len(corner), dtype=_VERTEX_DTYPE)
+    out["pos"] = verts[corner]
+    if part.normals is not None:
+        out["normal"] = np.asarray(part.normals, dtype=np.float32)[corner]
+    else:
+        tri = verts[faces]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-300), np.array([0.0, 0.0, 1.0]))
+        out["normal"] = np.repeat(n, 3, axis=0)
+    if part.uv is not None and part.texture is not None:
+        uv = np.asarray(part.uv, dtype=np.float32)[corner]
+        # Scene uv: (0, 0) = bottom-left of the image as displayed; GL t = 0 is image row 0 (top).
+        out["uv"][:, 0] = uv[:, 0]
+        out["uv"][:, 1] = 1.0 - uv[:, 1]
+    base = np.clip(np.asarray(part.base_color, dtype=np.float64), 0.0, 1.0)
+    if part.colors is not None:
+        col = np.asarray(part.colors, dtype=np.float64)[corner] / 255.0 * base
+    else:
+        col = np.broadcast_to(base, (len(corner), 4))
+    out["color"] = np.round(col * 255.0).astype(np.uint8)
+    return out
+
+
+def _marker_triangles(marker: Marker) -> np.ndarray:
+    """(6,) vertex records of a marker quad (two triangles) in the world frame."""
+    h = outer_size(marker.size) / 2.0
+    # Marker frame: x viewer's right, y up, z out of the wall. Image row 0 (GL t = 0) at +y.
+    local = np.array([[-h, h], [h, h], [h, -h], [-h, -h]])
+    st = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    T = np.asarray(marker.world_from_marker, dtype=np.float64)
+    pts = np.column_stack([local, np.full(4, MARKER_OFFSET)]) @ T[:3, :3].T + T[:3, 3]
+    idx = [0, 3, 2, 0, 2, 1]  # counter-clockwise seen from +z
+    out = np.zeros(6, dtype=_VERTEX_DTYPE)
+    out["pos"] = pts[idx]
+    out["normal"] = T[:3, 2]
+    out["uv"] = st[idx]
+    out["color"] = 255
+    return out
+
+
+class Renderer:
+    """Offscreen renderer of one scene; one GL context, scene uploaded once.
+
+    Use as a context manager (``with Renderer(scene) as r: r.render(pose)``) or call
+    :meth:`close`.
+
+    Args:
+        scene: the scene (world frame, z up, metres).
+        intrinsics: camera model; images are ``intrinsics.height`` x ``intrinsics.width``.
+        markers: markers drawn as tag quads on their walls.
+        mipmaps: build mipmaps for scene textures (trilinear minification) when True.
+        anisotropy: max anisotropic filtering of scene textures (1.0 = off; it is very slow on
+            llvmpipe).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        intrinsics: Intrinsics = Intrinsics(),
+        markers: Sequence[Marker] = (),
+        *,
+        mipmaps: bool = True,
+        anisotropy: float = 1.0,
+    ):
+        self.scene = scene
+        self.intrinsics = intrinsics
+        self._mipmaps = mipmaps
+        self._anisotropy = float(anisotropy)
+        self.ctx = create_context()
+        self._closed = False
+        try:
+            self._setup()
+            self.set_markers(markers)
+        except Exception:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ setup
+    def _setup(self) -> None:
+        import moderngl
+
+        ctx = self.ctx
+        W, H = self.intrinsics.width, self.intrinsics.height
+        self._size = (W, H)
+        self._proj = projection_matrix(self.intrinsics).astype("f4")
+        self._white = ctx.texture((1, 1), 3, b"\xff\xff\xff")
+        # Attachments shared by all output combinations.
+        self._tex_rgb = ctx.renderbuffer((W, H), 4)
+        self._tex_depth = ctx.renderbuffer((W, H), 1, dtype="f4")
+        self._tex_normal = ctx.renderbuffer((W, H), 4, dtype="f4")
+        self._zbuf = ctx.depth_renderbuffer((W, H))
+        self._programs: dict = {}
+        self._fbos: dict = {}
+        self._vaos: dict = {}
+
+        # Scene: one interleaved vertex buffer per distinct texture object (None = untextured).
+        groups: dict[int, list] = {}
+        textures: dict[int, np.ndarray | None] = {}
+        for part in self.scene.parts:
+            if len(part.faces) == 0:
+                continue
+            key = id(part.texture) if (part.texture is not None and part.uv is not None) else 0
+            textures[key] = part.texture if key else None
+            groups.setdefault(key, []).append(_triangles(part))
+        self._scene_draws = []  # (texture, vbo, n_vertices)
+        for key, chunks in groups.items():
+            data = np.concatenate(chunks)
+            tex = self._upload_texture(textures[key]) if key else self._white
+            self._scene_draws.append((tex, ctx.buffer(data.tobytes()), len(data)))
+        self._tag_textures: dict[int, object] = {}
+        self._marker_draws: list = []
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        log.debug(
+            "renderer: %d triangles in %d buffers, %dx%d, GL %s",
+            self.scene.num_faces if self.scene.parts else 0,
+            len(self._scene_draws),
+            W,
+            H,
+            ctx.info.get("GL_RENDERER", "?"),
+        )
+
+    def _upload_texture(self, image: np.ndarray):
+        import moderngl
+
+        img = np.ascontiguousarray(image)
+        if img.ndim == 2:
+            img = np.repeat(img[:, :, None], 3, axis=2)
+        if img.dtype != np.uint8:
+            raise UserError(f"scene texture has dtype {img.dtype}: textures must be uint8 RGB")
+        img = np.ascontiguousarray(img[:, :, :3])
+        # Row 0 of the array goes to GL t = 0; texture coordinates are flipped accordingly.
+        tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), alignment=1)
+        if self._mipmaps:
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        else:
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        tex.anisotropy = self._anisotropy
+        return tex
+
+    def _tag_texture(self, tag_id: int):
+        import moderngl
+
+        tex = self._tag_textures.get(tag_id)
+        if tex is None:
+            img = tag_image(tag_id, TAG_PIXELS_PER_BIT)
+            rgb = np.ascontiguousarray(np.repeat(img[:, :, None], 3, axis=2))
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, rgb.tobytes(), alignment=1)
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.NEAREST)
+            tex.repeat_x = tex.repeat_y = False
+            self._tag_textures[tag_id] = tex
+        return tex
+
+    def set_markers(self, markers: Sequence[Marker]) -> None:
+        """Replace the drawn markers (the scene buffers are kept)."""
+        for _, vbo, _ in self._marker_draws:
+            vbo.release()
+        for key in [k for k in self._vaos if k[0] == "marker"]:
+            self._vaos.pop(key).release()
+        self._marker_draws = []
+        for m in markers:
+            data = _marker_triangles(m)
+            self._marker_draws.append((self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
+        self.markers = tuple(markers)
+
+    def _program(self, outputs: tuple[bool, bool, bool]):
+        prog = self._programs.get(outputs)
+        if prog is None:
+            prog = self.ctx.program(vertex_shader=shaders.VERTEX, fragment_shader=shaders.fragment(*outputs))
+            prog["proj"].write(self._proj.T.tobytes())
+            if "tex" in prog:
+                prog["tex"].value = 0
+            self._programs[outputs] = prog
+        return prog
+
+    def _fbo(self, outputs: tuple[bool, bool, bool]):
+        fbo = self._fbos.get(outputs)
+        if fbo is None:
+            atts = [a for a, on in zip((self._tex_rgb, self._tex_depth, self._tex_normal), outputs) if on]
+            fbo = self.ctx.framebuffer(color_attachments=atts, depth_attachment=self._zbuf)
+            self._fbos[outputs] = fbo
+        return fbo
+
+    def _vao(self, kind: str, index: int, vbo, prog, outputs):
+        key = (kind, index, outputs)
+        vao = self._vaos.get(key)
+        if vao is None:
+            fmt, names = [], []
+            for name, f, nbytes in _ATTRS:
+                if name in prog:
+                    fmt.append(f)
+                    names.append(name)
+                else:
+                    fmt.append(f"{nbytes}x")
+            vao = self.ctx.vertex_array(prog, [(vbo, " ".join(fmt), *names)])
+            self._vaos[key] = vao
+        return vao
+
+    # ------------------------------------------------------------------ rendering
+    def render(
+        self,
+        world_from_cam: np.ndarray,
+        *,
+        rgb: bool = True,
+        depth: bool = True,
+        normal: bool = True,
+    ) -> RenderResult:
+        """Render one view.
+
+        Args:
+            world_from_cam: (4, 4) camera pose (OpenCV camera frame, world z up, metres).
+            rgb, depth, normal: which outputs to produce (skipping some is faster).
+
+        Returns:
+            :class:`RenderResult`; outputs not requested are None.
+        """
+        if self._closed:
+            raise RuntimeError("renderer is closed")
+        outputs = (bool(rgb), bool(depth), bool(normal))
+        if not any(outputs):
+            raise ValueError("request at least one of rgb, depth, normal")
+        T = np.asarray(world_from_cam, dtype=np.float64)
+        if T.shape != (4, 4):
+            raise ValueError(f"world_from_cam must be (4, 4), got {T.shape}")
+        prog = self._program(outputs)
+        fbo = self._fbo(outputs)
+        prog["cam_from_world"].write(invert(T).astype("f4").T.tobytes())
+        if "cam_pos" in prog:
+            prog["cam_pos"].value = tuple(float(v) for v in T[:3, 3])
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        for kind, draws in (("scene", self._scene_draws), ("marker", self._marker_draws)):
+            for i, (tex, vbo, n) in enumerate(draws):
+                if outputs[0]:
+                    tex.use(0)
+                self._vao(kind, i, vbo, prog, outputs).render(vertices=n)
+        W, H = self._size
+        att = 0
+        out_rgb = out_depth = out_normal = None
+        if outputs[0]:
+            out_rgb = np.empty((H, W, 3), np.uint8)
+            fbo.read_into(out_rgb, components=3, attachment=att, alignment=1)
+            att += 1
+        if outputs[1]:
+            out_depth = np.empty((H, W), np.float32)
+            fbo.read_into(out_depth, components=1, attachment=att, dtype="f4")
+            att += 1
+        if outputs[2]:
+            out_normal = np.empty((H, W, 3), np.float32)
+            fbo.read_into(out_normal, components=3, attachment=att, dtype="f4")
+        return RenderResult(out_rgb, out_depth, out_normal, T.copy())
+
+    def render_batch(self, poses: Iterable[np.ndarray], **outputs: bool) -> Iterator[RenderResult]:
+        """Render each (4, 4) ``world_from_cam`` of ``poses`` in turn (same flags as :meth:`render`)."""
+        for T in poses:
+            yield self.render(T, **outputs)
+
+    # ------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        """Release all GL objects and the context (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self.ctx.release()
+        except Exception:  # pragma: no cover - best effort on teardown
+            log.debug("GL context release failed", exc_info=True)
+
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):  # pragma: no cover - GC safety net
+        try:
+            if not getattr(self, "_closed", True):
+                self.close()
+        except Exception:
+            pass
