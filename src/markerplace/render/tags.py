@@ -8,11 +8,15 @@ included, has edge :func:`outer_size` ``(size)``.
 The images come from OpenCV's aruco module (``DICT_APRILTAG_36h11``); ids agree with
 pupil-apriltags' ``tag36h11`` (checked by detection in ``tests/test_render_tags.py``).
 
+pupil-apriltags' corners of rendered tags sit about 0.3-0.5 px right/below
+:func:`markerplace.geometry.project` of the true corners (its sub-pixel convention; OpenCV's
+centres pixels at integers), well within 1 px.
+
 Corner order: :func:`markerplace.geometry.marker_corners_local` lists the black-square corners
 top-left, top-right, bottom-right, bottom-left as a facing viewer sees them (OpenCV's ArUco
-order). pupil-apriltags reports ``Detection.corners`` in a different order: counter-clockwise
-in the image starting at the bottom-left, i.e. (bottom-left, bottom-right, top-right, top-left)
-= our indices ``PUPIL_TO_MARKER_CORNERS`` = (3, 2, 1, 0). So
+order). pupil-apriltags reports ``Detection.corners`` in a different order (established by
+detection of rendered tags, see the tests): top-right, top-left, bottom-left, bottom-right as
+the viewer sees the tag, i.e. our indices ``PUPIL_TO_MARKER_CORNERS`` = (1, 0, 3, 2). So
 ``detection.corners[i]`` matches ``marker.corners_world()[PUPIL_TO_MARKER_CORNERS[i]]``.
 """
 
@@ -30,7 +34,7 @@ QUIET_BITS = 2
 """Bits of white quiet zone drawn around the black square on each side."""
 NUM_TAGS = 587
 """Number of ids in tag36h11."""
-PUPIL_TO_MARKER_CORNERS = (3, 2, 1, 0)
+PUPIL_TO_MARKER_CORNERS = (1, 0, 3, 2)
 """``detection.corners[i]`` (pupil-apriltags) is ``marker.corners_world()[PUPIL_TO_MARKER_CORNERS[i]]``."""
 
 
