@@ -33,6 +33,7 @@ _PUPIL_TO_TLTRBRBL = [1, 0, 3, 2]
 _PUPIL_PIXEL_OFFSET = 0.5
 
 _DETECTORS: dict[int, object] = {}
+_MARKER_FROM_FLIPPED = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,12 +107,17 @@ def pose_from_tag(detection: TagDetection, marker: Marker, K: np.ndarray) -> np.
         marker: the tag's known pose and size.
         K: (3, 3) camera matrix.
     """
-    obj = marker_corners_local(marker.size).astype(np.float64)
-    img = np.asarray(detection.corners, dtype=np.float64).reshape(4, 1, 2)
-    ok, rvec, tvec = cv2.solvePnP(obj.reshape(4, 1, 3), img, np.asarray(K, float), None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    if not ok:
+    # OpenCV's IPPE returns garbage rotations when the answer is near a half-turn (rvec norm
+    # ~ pi), which is exactly the case for a camera facing a marker (marker y up, camera y
+    # down). Solve in a flipped frame F = marker rotated by pi about x (F's y down, z into the
+    # wall), where facing views are near the identity. IPPE_SQUARE wants the corners at
+    # (-h, h), (h, h), (h, -h), (-h, -h) in F, i.e. the marker's BL, BR, TR, TL.
+    obj = marker_corners_local(marker.size).astype(np.float64).reshape(4, 1, 3)
+    img = np.asarray(detection.corners, dtype=np.float64)[[3, 2, 1, 0]].reshape(4, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, np.asarray(K, float), None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok or not np.all(np.isfinite(rvec)) or not np.all(np.isfinite(tvec)):
         raise RuntimeError("solvePnP(IPPE_SQUARE) failed on a tag detection")
-    cam_from_marker = np.eye(4)
-    cam_from_marker[:3, :3] = cv2.Rodrigues(rvec)[0]
-    cam_from_marker[:3, 3] = tvec.reshape(3)
-    return np.asarray(marker.world_from_marker, float) @ invert(cam_from_marker)
+    cam_from_flipped = np.eye(4)
+    cam_from_flipped[:3, :3] = cv2.Rodrigues(rvec)[0]
+    cam_from_flipped[:3, 3] = tvec.reshape(3)
+    return np.asarray(marker.world_from_marker, float) @ _MARKER_FROM_FLIPPED @ invert(cam_from_flipped)
