@@ -255,3 +255,177 @@ def threshold_label(threshold: tuple[float, float]) -> str:
     t, r = threshold
     dist = f"{t * 100:g}cm" if t < 1.0 else f"{t:g}m"
     return f"{dist}/{r:g}deg"
+
+
+# --- experiments -------------------------------------------------------------------------------
+
+METHODS = ("none", "omp", "random", "uniform")
+
+
+@dataclass(frozen=True)
+class EvaluateConfig:
+    """Settings of an ``evaluate`` run (the paper's experiments; defaults as published).
+
+    Attributes:
+        tests: test images per test set (paper: 200 room ... 10000 apartment).
+        test_sets: ``weighted`` (towards low scores) and/or ``uniform``.
+        methods: ``none``, ``omp``, ``random``, ``uniform`` (the paper's comparison).
+        runs: placements per randomized baseline (random, uniform), seeds ``placement_seed + run``.
+        ks: marker budgets (OMP is computed once with max k; prefixes are the smaller budgets).
+        thresholds: recall thresholds (metres, degrees).
+        use_tags: tag detection in the localizer (paper's "marker detection"; off = --no-tags).
+        tag_corners: also use the tag corners as 2D-3D correspondences.
+        tag_scale: printed tag size = planned size * tag_scale (sensitivity study; the planner's
+            marker model still uses the nominal size).
+        shift: markers are moved along their wall by +-shift metres, alternating sign with a
+            seeded first sign (sensitivity study).
+        seed: seed of the test poses and of the shift signs.
+        min_clearance: test cameras need this clearance (metres) from non-free cells.
+        vlad_clusters: k-means clusters of the VLAD codebook (trained on the no-marker map).
+    """
+
+    tests: int = 200
+    test_sets: tuple[str, ...] = TEST_SETS
+    methods: tuple[str, ...] = METHODS
+    runs: int = 5
+    ks: tuple[int, ...] = (5, 10, 15, 20)
+    thresholds: tuple[tuple[float, float], ...] = THRESHOLDS
+    use_tags: bool = True
+    tag_corners: bool = False
+    tag_scale: float = 1.0
+    shift: float = 0.0
+    seed: int = 0
+    min_clearance: float = 0.1
+    vlad_clusters: int = 64
+
+
+def validate_evaluate_config(config: EvaluateConfig) -> None:
+    """Raise :class:`UserError` (one line) for settings that cannot work."""
+    if config.tests < 1:
+        raise UserError(f"--tests {config.tests} must be at least 1")
+    if not config.test_sets or any(t not in TEST_SETS for t in config.test_sets):
+        raise UserError(f"--test-sets {','.join(config.test_sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")
+    if any(m not in METHODS for m in config.methods):
+        raise UserError(f"--methods {','.join(config.methods)!r} is not valid: use a comma list of {', '.join(METHODS)}")
+    if config.runs < 1:
+        raise UserError(f"--runs {config.runs} must be at least 1")
+    if not config.ks or any(k < 1 for k in config.ks):
+        raise UserError(f"--k {','.join(map(str, config.ks))!r} must list positive marker counts, e.g. 5,10,15,20")
+    if not 0.1 <= config.tag_scale <= 5.0:
+        raise UserError(f"--tag-scale {config.tag_scale} is out of range: give a factor in [0.1, 5], e.g. 1.25")
+    if not 0.0 <= config.shift <= 5.0:
+        raise UserError(f"--shift {config.shift} m is out of range: give a distance in [0, 5] metres")
+    if config.vlad_clusters < 2:
+        raise UserError(f"VLAD clusters {config.vlad_clusters} must be at least 2")
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementRun:
+    """One evaluated marker set.
+
+    Attributes:
+        method: ``none``, ``omp``, ``random``, ``uniform`` or an extra method name.
+        run: run index (0 for deterministic methods).
+        k: number of markers (0 for ``none``).
+        markers: the markers as drawn in the scene (after tag scale and shift).
+    """
+
+    method: str
+    run: int
+    k: int
+    markers: tuple
+
+
+def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
+    """Move marker i along its wall (marker x axis) by ``s_i * shift`` metres, ``s_i = s0 (-1)^i``
+    with a seeded random first sign ``s0``; orientation unchanged."""
+    from .markers import Marker
+
+    if shift == 0.0 or not markers:
+        return list(markers)
+    s0 = 1.0 if np.random.default_rng(seed).random() < 0.5 else -1.0
+    out = []
+    for i, m in enumerate(markers):
+        T = np.array(m.world_from_marker, dtype=float)
+        T[:3, 3] += s0 * (-1.0) ** i * shift * T[:3, 0]
+        out.append(Marker(m.tag_id, m.size, T, m.family))
+    return out
+
+
+def scale_markers(markers: Sequence, scale: float) -> list:
+    """Markers printed ``scale`` times their planned size (same centre and orientation)."""
+    from .markers import Marker
+
+    if scale == 1.0:
+        return list(markers)
+    return [Marker(m.tag_id, m.size * scale, np.array(m.world_from_marker, float), m.family) for m in markers]
+
+
+def build_placements(data, placement_config, config: EvaluateConfig,
+                     extra: dict[str, Sequence] | None = None) -> list[PlacementRun]:
+    """Every marker set to evaluate, in processing order.
+
+    Args:
+        data: the planner's :class:`~markerplace.planner.PlanData` (one ``prepare``).
+        placement_config: the planner's :class:`~markerplace.planner.PlacementConfig` (v,
+            marker model, tag size, similarity, placement seed).
+        config: evaluation settings (methods, runs, ks, tag scale, shift).
+        extra: method name -> ordered markers (e.g. from ``--placements``); evaluated at each k
+            up to their length (prefixes), or at their full length when shorter than every k.
+
+    OMP is placed once with max k and evaluated on prefixes (the greedy is nested); random and
+    uniform draw their own placement for every (run, k) with seed ``placement_seed + run``.
+    """
+    from dataclasses import replace
+
+    from .planner import place
+
+    ks = sorted(set(config.ks))
+    runs: list[PlacementRun] = []
+
+    def add(method, run, k, markers):
+        markers = shift_markers(scale_markers(markers, config.tag_scale), config.shift, config.seed)
+        runs.append(PlacementRun(method, run, k, tuple(markers)))
+
+    if "none" in config.methods:
+        runs.append(PlacementRun("none", 0, 0, ()))
+    if "omp" in config.methods:
+        omp = place(data, replace(placement_config, k=max(ks), method="omp"), progress=False)
+        for k in ks:
+            add("omp", 0, k, omp.markers[:k])
+    for method in ("random", "uniform"):
+        if method in config.methods:
+            for run in range(config.runs):
+                for k in ks:
+                    pl = place(data, replace(placement_config, k=k, method=method, seed=placement_config.seed + run),
+                               progress=False)
+                    add(method, run, k, pl.markers)
+    for name, markers in (extra or {}).items():
+        fits = [k for k in ks if k <= len(markers)] or [len(markers)]
+        for k in fits:
+            add(name, 0, k, list(markers)[:k])
+    return runs
+
+
+def find_placement_files(folder: str | Path) -> dict[str, Path]:
+    """``placement.json`` (or any ``*.json``) files under ``folder`` -> method name.
+
+    The name is the parent folder for files called ``placement.json`` and the file stem
+    otherwise. Raises :class:`UserError` when nothing is found or names clash.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise UserError(f"--placements {folder} is not a directory")
+    found: dict[str, Path] = {}
+    for path in sorted(folder.rglob("*.json")):
+        if path.name.endswith(".meta.json") or path.name == "config.json":
+            continue
+        name = path.parent.name if path.name == "placement.json" else path.stem
+        if name in METHODS:
+            name = f"{name}-file"
+        if name in found:
+            raise UserError(f"--placements: two files give the method name {name!r} ({found[name]}, {path}): rename one")
+        found[name] = path
+    if not found:
+        raise UserError(f"--placements {folder} holds no placement.json files: run `markerplace plan` first")
+    return found
