@@ -233,7 +233,13 @@ class Renderer:
             img = np.repeat(img[:, :, None], 3, axis=2)
         if img.dtype != np.uint8:
             raise UserError(f"scene texture has dtype {img.dtype}: textures must be uint8 RGB")
-        img = np.ascontiguousarray(img[:, :, :3])
+        img = img[:, :, :3]
+        max_size = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        step = int(np.ceil(max(img.shape[:2]) / max_size))
+        if step > 1:
+            log.warning("texture of %dx%d px exceeds the GL limit %d: subsampled by %d", img.shape[1], img.shape[0], max_size, step)
+            img = img[::step, ::step]
+        img = np.ascontiguousarray(img)
         # Row 0 of the array goes to GL t = 0; texture coordinates are flipped accordingly.
         tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), alignment=1)
         if self._mipmaps:
