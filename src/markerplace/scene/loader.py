@@ -1,0 +1,229 @@
+"""Load a mesh file (glTF/GLB, OBJ + MTL, PLY) into a normalized :class:`Scene` (z up, metres).
+
+Axis conventions
+----------------
+* glTF is y-up by its specification: a glTF point (x, y, z) becomes the world point (x, -z, y)
+  (a +90 deg rotation about x). ``up`` may override this for files exported with the wrong axis.
+* OBJ and PLY have no convention: ``up`` names the file's up axis (default ``"z"``).
+* ``unit_scale`` multiplies coordinates after the rotation (e.g. 0.01 for centimetres).
+
+Materials are kept: textures as (H, W, 3) uint8 RGB arrays (row 0 = top), UVs in the glTF/trimesh
+convention (v grows upwards), per-vertex RGBA colours, and the base colour (glTF
+``baseColorFactor`` / MTL ``Kd``). Identical texture images are shared between parts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UserError
+from .types import MeshPart, Scene
+
+log = logging.getLogger(__name__)
+
+SUPPORTED_EXTENSIONS = (".glb", ".gltf", ".obj", ".ply")
+GREY = (0.7, 0.7, 0.7, 1.0)
+MAX_DIAGONAL_M = 1000.0
+MIN_EXTENT_M = 1.0
+
+_FORMAT_NAMES = {".glb": "binary glTF", ".gltf": "glTF", ".obj": "Wavefront OBJ", ".ply": "PLY"}
+
+# world_from_file rotations for each up axis of the file.
+_UP_ROTATIONS = {
+    "z": np.eye(3),
+    "y": np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]),  # (x, y, z) -> (x, -z, y)
+    "-y": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),  # (x, y, z) -> (x, z, -y)
+    "x": np.array([[0.0, 0, -1], [0, 1, 0], [1, 0, 0]]),  # (x, y, z) -> (-z, y, x)
+    "-x": np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]),  # (x, y, z) -> (z, y, -x)
+    "-z": np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]]),  # (x, y, z) -> (x, -y, -z)
+}
+UP_CHOICES = tuple(_UP_ROTATIONS)
+
+
+def up_rotation(up: str) -> np.ndarray:
+    """(3, 3) rotation ``world_from_file`` that maps the file's ``up`` axis onto world +z."""
+    key = str(up).strip().lower().lstrip("+")
+    if key not in _UP_ROTATIONS:
+        raise UserError(f"--up {up!r} is not an axis; use one of {', '.join(UP_CHOICES)}")
+    return _UP_ROTATIONS[key]
+
+
+def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | None = None) -> Scene:
+    """Read a mesh file and return a :class:`Scene` in the world frame (z up, metres).
+
+    Args:
+        path: a ``.glb``, ``.gltf``, ``.obj`` or ``.ply`` file.
+        up: the file's up axis (z, y, -y, x, -x, -z). Default: ``y`` for glTF, ``z`` otherwise.
+        unit_scale: factor from file units to metres (default 1).
+
+    Raises:
+        UserError: missing file, unsupported format, unreadable file, no faces, or a size that is
+            not plausible in metres (bounding-box diagonal > 1000 m or largest extent < 1 m).
+    """
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED_EXTENSIONS:
+        raise UserError(
+            f"{path}: unknown scene format {ext or '(no extension)'!r}; supported: "
+            f"{', '.join(SUPPORTED_EXTENSIONS)} or a built-in name (see `markerplace scene list`)"
+        )
+    if not path.is_file():
+        raise UserError(f"{path}: no such file; give a mesh file ({', '.join(SUPPORTED_EXTENSIONS)}) or a built-in name")
+    scale = 1.0 if unit_scale is None else float(unit_scale)
+    if not np.isfinite(scale) or scale <= 0:
+        raise UserError(f"--unit-scale {unit_scale!r} must be a positive number (e.g. 0.01 for centimetres)")
+    is_gltf = ext in (".glb", ".gltf")
+    R = up_rotation(up if up is not None else ("y" if is_gltf else "z"))
+
+    meshes = _read_trimeshes(path, ext)
+    parts = _to_parts(meshes, R * scale, path.stem)
+    if not parts:
+        raise UserError(f"{path}: the file contains no triangle faces (a point cloud or empty mesh?); give a triangle mesh")
+    scene = Scene(name=path.stem, parts=tuple(parts), source=str(path))
+    _check_units(scene, path, scale)
+    return scene
+
+
+def _read_trimeshes(path: Path, ext: str) -> list:
+    """All triangle meshes of the file with scene-graph transforms applied (file frame)."""
+    import trimesh
+
+    fmt = _FORMAT_NAMES[ext]
+    try:
+        loaded = trimesh.load(str(path), force="scene", process=False)
+        dumped = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+    except Exception as err:  # trimesh raises many kinds of errors on corrupt input
+        reason = " ".join(str(err).split())[:200] or type(err).__name__
+        raise UserError(f"could not read {path}: {reason}; check the file is a valid {fmt} file") from None
+    return [m for m in dumped if isinstance(m, trimesh.Trimesh) and len(m.faces) > 0]
+
+
+def _to_parts(meshes: list, world_from_file: np.ndarray, stem: str) -> list[MeshPart]:
+    """Convert trimesh meshes to :class:`MeshPart` (vertices mapped by the (3, 3) ``world_from_file``)."""
+    parts: list[MeshPart] = []
+    textures: dict[str, np.ndarray] = {}
+    untextured = 0
+    flip = np.linalg.det(world_from_file) < 0
+    for i, mesh in enumerate(meshes):
+        vertices = np.asarray(mesh.vertices, dtype=np.float64) @ world_from_file.T
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        if flip:
+            faces = faces[:, ::-1]
+        uv, colors, texture, base = _visual(mesh, textures)
+        normals = _file_normals(mesh, world_from_file)
+        if colors is not None and len(colors) != len(vertices):
+            # face colours: give every face its own three vertices
+            vertices, faces, colors, uv, normals = _unshare(vertices, faces, colors, uv, normals)
+        if texture is None and colors is None:
+            untextured += 1
+            if base is None:
+                base = GREY
+        name = str(mesh.metadata.get("name") or f"{stem}_{i}")
+        parts.append(
+            MeshPart(
+                name=name,
+                vertices=vertices.astype(np.float32),
+                faces=faces.astype(np.int32),
+                uv=None if uv is None else uv.astype(np.float32),
+                colors=colors,
+                texture=texture,
+                base_color=tuple(float(c) for c in (base if base is not None else (1.0, 1.0, 1.0, 1.0))),
+                normals=None if normals is None else normals.astype(np.float32),
+            )
+        )
+    if untextured:
+        log.warning(
+            "%d of %d mesh parts have no texture or vertex colours; they are drawn in a plain colour "
+            "and will give few image features",
+            untextured,
+            len(parts),
+        )
+    return parts
+
+
+def _visual(mesh, textures: dict[str, np.ndarray]):
+    """(uv (N, 2) | None, colors (N or 3F, 4) uint8 | None, texture | None, base RGBA floats | None)."""
+    visual = mesh.visual
+    kind = getattr(visual, "kind", None)
+    if kind == "texture":
+        material = visual.material
+        uv = None if visual.uv is None else np.asarray(visual.uv, dtype=np.float64)[:, :2]
+        image = getattr(material, "baseColorTexture", None)
+        if image is None:
+            image = getattr(material, "image", None)
+        factor = getattr(material, "baseColorFactor", None)
+        if factor is None:
+            factor = getattr(material, "diffuse", None)
+        base = None if factor is None else tuple(np.asarray(factor, dtype=float).reshape(-1)[:4] / 255.0)
+        texture = None
+        if image is not None and uv is not None and len(uv) == len(mesh.vertices):
+            texture = _shared_texture(image, textures)
+        else:
+            uv = None
+        return uv, None, texture, base
+    if kind == "vertex":
+        return None, np.ascontiguousarray(visual.vertex_colors, dtype=np.uint8), None, None
+    if kind == "face":
+        return None, np.ascontiguousarray(visual.face_colors, dtype=np.uint8), None, None
+    return None, None, None, None
+
+
+def _shared_texture(image, textures: dict[str, np.ndarray]) -> np.ndarray:
+    """PIL image -> read-only (H, W, 3) uint8 RGB array; equal images share one array."""
+    if image.mode in ("RGBA", "LA", "P"):
+        image = image.convert("RGBA")
+    arr = np.asarray(image.convert("RGB"), dtype=np.uint8)
+    key = hashlib.sha1(arr.tobytes()).hexdigest() + str(arr.shape)
+    if key not in textures:
+        arr = np.ascontiguousarray(arr)
+        arr.flags.writeable = False
+        textures[key] = arr
+    return textures[key]
+
+
+def _file_normals(mesh, world_from_file: np.ndarray) -> np.ndarray | None:
+    """Vertex normals stored in the file (rotated to the world frame), else None."""
+    try:
+        cached = mesh._cache.cache.get("vertex_normals")
+    except AttributeError:
+        return None
+    if cached is None or len(cached) != len(mesh.vertices):
+        return None
+    n = np.asarray(cached, dtype=np.float64) @ world_from_file.T
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(norm > 0, norm, 1.0)
+
+
+def _unshare(vertices, faces, face_colors, uv, normals):
+    """Split vertices so each face owns its 3 vertices; face colours become vertex colours."""
+    idx = faces.reshape(-1)
+    new_faces = np.arange(len(idx)).reshape(-1, 3)
+    colors = np.repeat(face_colors, 3, axis=0)
+    return (
+        vertices[idx],
+        new_faces,
+        colors,
+        None if uv is None else uv[idx],
+        None if normals is None else normals[idx],
+    )
+
+
+def _check_units(scene: Scene, path: Path, scale: float) -> None:
+    """Fail with a ``--unit-scale`` hint when the model is not plausibly in metres."""
+    lo, hi = scene.bounds
+    extent = hi - lo
+    diagonal = float(np.linalg.norm(extent))
+    if diagonal > MAX_DIAGONAL_M:
+        raise UserError(
+            f"{path}: the model is {diagonal:.0f} m across after scaling by {scale:g}, too big for a building; "
+            f"it is probably in cm or mm: pass --unit-scale 0.01 (cm) or 0.001 (mm)"
+        )
+    if float(extent.max()) < MIN_EXTENT_M:
+        raise UserError(
+            f"{path}: the model is only {float(extent.max()):.3g} m across after scaling by {scale:g}, too small for a room; "
+            f"pass --unit-scale with the size of one file unit in metres (e.g. 0.3048 for feet)"
+        )
