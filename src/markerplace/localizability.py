@@ -266,7 +266,12 @@ def pose_information(world_from_cam: np.ndarray, K: np.ndarray, points_world: np
 def logdet_spd(M: np.ndarray) -> np.ndarray:
     """ln det of (..., n, n) symmetric positive definite matrices via Cholesky."""
     L = np.linalg.cholesky(M)
-    return 2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
+    d = np.log(np.diagonal(L, axis1=-2, axis2=-1))
+    # Explicit left-to-right sum: the result of one matrix never depends on the batch shape.
+    acc = d[..., 0].copy()
+    for i in range(1, d.shape[-1]):
+        acc += d[..., i]
+    return 2.0 * acc
 
 
 def entropy(Lambda: np.ndarray) -> np.ndarray:
@@ -282,6 +287,27 @@ def score(Lambda: np.ndarray) -> np.ndarray:
     return -entropy(Lambda)
 
 
+def whitening(Lambda: np.ndarray) -> np.ndarray:
+    """(..., 6, 6) ``L^-1`` with ``Lambda = L L^T`` (Cholesky): the whitening used by gains."""
+    return np.linalg.inv(np.linalg.cholesky(np.asarray(Lambda, dtype=float)))
+
+
+def information_gain_whitened(L_inv: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """:func:`information_gain` given the precomputed :func:`whitening` ``L^-1`` of Lambda.
+
+    Args:
+        L_inv: (..., 6, 6) inverse Cholesky factor of Lambda.
+        M: (..., 6, 6) symmetric PSD information added.
+
+    Returns:
+        (...,) ``1/2 ln det(I + L^-1 M L^-T)`` (nats), clipped at 0.
+    """
+    X = np.matmul(np.matmul(L_inv, M), np.swapaxes(L_inv, -1, -2))
+    X = 0.5 * (X + np.swapaxes(X, -1, -2))
+    X[..., np.arange(6), np.arange(6)] += 1.0
+    return np.maximum(0.5 * logdet_spd(X), 0.0)
+
+
 def information_gain(Lambda: np.ndarray, M: np.ndarray) -> np.ndarray:
     """Entropy decrease ``1/2 [ln det(Lambda + M) - ln det(Lambda)]`` (nats), >= 0.
 
@@ -290,16 +316,9 @@ def information_gain(Lambda: np.ndarray, M: np.ndarray) -> np.ndarray:
         M: (..., 6, 6) symmetric PSD information the marker adds (may be zero or huge).
 
     Computed as ``1/2 ln det(I + L^-1 M L^-T)`` with ``Lambda = L L^T``, which stays accurate
-    when M dominates Lambda by many orders of magnitude.
+    both when M dominates Lambda by many orders of magnitude and when M is tiny.
     """
-    Lambda = np.asarray(Lambda, dtype=float)
-    M = np.asarray(M, dtype=float)
-    L = np.linalg.cholesky(Lambda)
-    Y = np.linalg.solve(L, M)  # L^-1 M
-    X = np.linalg.solve(L, np.swapaxes(Y, -1, -2))  # L^-1 M L^-T
-    X = 0.5 * (X + np.swapaxes(X, -1, -2))
-    X[..., np.arange(6), np.arange(6)] += 1.0
-    return np.maximum(0.5 * logdet_spd(X), 0.0)
+    return information_gain_whitened(whitening(Lambda), np.asarray(M, dtype=float))
 
 
 # --------------------------------------------------------------------------------------------
@@ -458,5 +477,5 @@ def marker_visibility(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
 __all__ = [
     "ENTROPY_CONST", "MIN_SIDE_PX", "NoiseConfig", "entropy", "information_gain", "logdet_spd",
     "marker_information_corners", "marker_information_paper", "marker_visibility",
-    "pose_information", "score",
+    "pose_information", "score", "information_gain_whitened", "whitening",
 ]
