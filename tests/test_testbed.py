@@ -1,0 +1,141 @@
+"""Testbed: marker-in-view test, feature re-use across placements, feature sets, experiments,
+and a small end-to-end ``evaluate`` run."""
+
+import json
+
+import numpy as np
+import pytest
+
+from markerplace import evaluation as ev
+from markerplace import testbed as tbm
+from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
+from markerplace.markers import Marker
+from markerplace.scene.types import MeshPart, Scene
+
+
+def _box_scene(size=4.0, height=2.7):
+    """A closed textured box room [0, size]^2 x [0, height] with seeded noise walls."""
+    rng = np.random.default_rng(0)
+    tex = (rng.random((256, 256, 3)) * 255).astype(np.uint8)
+    tex = np.kron(tex[::4, ::4], np.ones((4, 4, 1), np.uint8))  # blocky -> plenty of SIFT
+    s, h = size, height
+    quads = {  # inward-facing walls, floor, ceiling (counter-clockwise seen from inside)
+        "south": [(0, 0, 0), (s, 0, 0), (s, 0, h), (0, 0, h)],
+        "north": [(s, s, 0), (0, s, 0), (0, s, h), (s, s, h)],
+        "west": [(0, s, 0), (0, 0, 0), (0, 0, h), (0, s, h)],
+        "east": [(s, 0, 0), (s, s, 0), (s, s, h), (s, 0, h)],
+        "floor": [(0, 0, 0), (0, s, 0), (s, s, 0), (s, 0, 0)],
+        "ceiling": [(0, 0, h), (s, 0, h), (s, s, h), (0, s, h)],
+    }
+    parts = []
+    for name, q in quads.items():
+        v = np.array(q, np.float32)
+        uv = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32)
+        parts.append(MeshPart(name, v, np.array([[0, 1, 2], [0, 2, 3]], np.int32), uv=uv, texture=tex))
+    return Scene("box", tuple(parts), floor_z=0.0)
+
+
+class _BoxSpec:
+    """Picklable stand-in for SceneSpec (workers=1 runs in-process anyway)."""
+
+    def load(self):
+        return _box_scene()
+
+
+def test_markers_in_view_projection_margin_and_occlusion():
+    K = Intrinsics().K
+    cam = world_from_cam_pose(np.array([2.0, 2.0, 1.5]), 0.0)  # looks along +x
+    depth = np.full((450, 600), 2.0, np.float32)  # wall 2 m ahead
+    ahead = Marker(0, 0.4, world_from_marker_pose(np.array([4.0, 2.0, 1.5]), np.array([-1.0, 0, 0])))
+    behind = Marker(1, 0.4, world_from_marker_pose(np.array([0.0, 2.0, 1.5]), np.array([1.0, 0, 0])))
+    side = Marker(2, 0.4, world_from_marker_pose(np.array([2.5, 4.0, 1.5]), np.array([0, -1.0, 0])))
+    samples = tbm.marker_samples([ahead, behind, side], grid=7)
+    assert samples.shape == (3, 49, 3)
+    vis = tbm.markers_in_view(depth, cam, K, samples, margin_px=16, tolerance=0.1)
+    # 'ahead' sits at 2 m depth but the wall there is at 2 m -> visible; 'behind' is behind the
+    # camera; 'side' projects far outside the 90 deg field of view.
+    assert vis.tolist() == [True, False, False]
+    occluded = tbm.markers_in_view(np.full((450, 600), 1.0, np.float32), cam, K, samples, 16, 0.1)
+    assert occluded.tolist() == [False, False, False]
+    # a marker just outside the image border still counts inside the margin
+    edge = Marker(3, 0.2, world_from_marker_pose(np.array([4.0, 4.3, 1.5]), np.array([-1.0, 0, 0])))
+    s = tbm.marker_samples([edge], grid=7)
+    assert tbm.markers_in_view(depth, cam, K, s, margin_px=40, tolerance=0.1).tolist() == [True]
+    assert tbm.markers_in_view(depth, cam, K, s, margin_px=0, tolerance=0.1).tolist() == [False]
+
+
+def test_feature_set_round_trip_and_replace(tmp_path):
+    rng = np.random.default_rng(0)
+
+    def img(n, t):
+        return tbm.ImageFeatures(rng.random((n, 2), np.float32), rng.integers(0, 255, (n, 128)).astype(np.uint8),
+                                 rng.random((n, 3)).astype(np.float32), np.arange(t, dtype=np.int32),
+                                 rng.random((t, 4, 2)).astype(np.float32))
+
+    fs = tbm.FeatureSet.from_images([img(5, 0), img(0, 1), img(3, 2)])
+    assert len(fs) == 3 and fs.offsets.tolist() == [0, 5, 5, 8] and fs.tag_offsets.tolist() == [0, 0, 1, 3]
+    fs.save(tmp_path / "f")
+    back = tbm.FeatureSet.load(tmp_path / "f", mmap=True)
+    assert np.array_equal(back.descriptors, fs.descriptors) and np.array_equal(back.image(2).tag_corners, fs.image(2).tag_corners)
+    new = img(7, 1)
+    rep = back.with_images({1: new})
+    assert rep.offsets.tolist() == [0, 5, 12, 15] and np.array_equal(rep.image(1).keypoints, new.keypoints)
+    assert np.array_equal(rep.image(2).descriptors, fs.image(2).descriptors)
+
+
+def test_render_reuse_identical_without_marker_in_view():
+    """The efficiency premise: a render whose view holds no marker equals the marker-free one,
+    and the in-view test flags the markers that do change the image."""
+    seen = Marker(5, 0.4, world_from_marker_pose(np.array([4.0, 2.0, 1.5]), np.array([-1.0, 0, 0])))
+    unseen = Marker(6, 0.4, world_from_marker_pose(np.array([0.0, 2.0, 1.5]), np.array([1.0, 0, 0])))
+    poses = np.stack([world_from_cam_pose(np.array([2.0, 2.0, 1.5]), 0.0),
+                      world_from_cam_pose(np.array([2.0, 2.0, 1.5]), np.pi)])
+    cfg = tbm.TestbedConfig(workers=1)
+    with tbm.Testbed(_BoxSpec(), cfg, [seen, unseen], progress=False) as tb:
+        base = tb.render_features(poses, [0, 1], [], True, False, "base")
+        marked = tb.render_features(poses, [0, 1], [seen], False, False, "with marker")
+    vis = np.stack([base[0][1], base[1][1]])
+    assert vis.tolist() == [[True, False], [False, True]]
+    assert tb.view_keys(vis, [seen]) == [(0,), ()]
+    assert tb.view_keys(vis, []) == [(), ()]
+    # pose 1 looks away from 'seen': features identical with and without it
+    assert np.array_equal(base[1][0].descriptors, marked[1][0].descriptors)
+    assert np.array_equal(base[1][0].keypoints, marked[1][0].keypoints)
+    # pose 0 sees it: different features, and the tag is detected with its id
+    assert not np.array_equal(base[0][0].keypoints, marked[0][0].keypoints)
+    assert marked[0][0].tag_ids.tolist() == [5] and base[0][0].tag_ids.tolist() == []
+
+
+def test_shift_and_scale_markers():
+    ms = [Marker(i, 0.4, world_from_marker_pose(np.array([1.0 + i, 0.0, 1.5]), np.array([0, 1.0, 0]))) for i in range(4)]
+    shifted = ev.shift_markers(ms, 0.25, seed=3)
+    d = np.array([s.position - m.position for s, m in zip(shifted, ms)])
+    assert np.allclose(np.abs(d[:, 0]), 0.25) and np.allclose(d[:, 1:], 0)
+    assert np.all(np.sign(d[1:, 0]) == -np.sign(d[:-1, 0]))  # alternating
+    assert np.allclose([s.world_from_marker[:3, :3] for s in shifted], [m.world_from_marker[:3, :3] for m in ms])
+    again = ev.shift_markers(ms, 0.25, seed=3)
+    assert np.allclose([a.position for a in again], [s.position for s in shifted])
+    scaled = ev.scale_markers(ms, 1.5)
+    assert all(s.size == pytest.approx(0.6) and np.allclose(s.position, m.position) for s, m in zip(scaled, ms))
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("tag_scale", 0.0, "--tag-scale"), ("shift", -1.0, "--shift"), ("methods", ("omp", "best"), "--methods"),
+    ("test_sets", ("hard",), "--test-sets"), ("ks", (0,), "--k"), ("runs", 0, "--runs"), ("tests", 0, "--tests"),
+])
+def test_bad_evaluate_settings_are_user_errors(field, value, message):
+    from dataclasses import replace
+
+    from markerplace.errors import UserError
+
+    with pytest.raises(UserError, match=message):
+        ev.validate_evaluate_config(replace(ev.EvaluateConfig(), **{field: value}))
+
+
+def test_find_placement_files(tmp_path):
+    (tmp_path / "expert").mkdir()
+    (tmp_path / "expert" / "placement.json").write_text(json.dumps({"markers": []}))
+    (tmp_path / "human.json").write_text("[]")
+    (tmp_path / "expert" / "config.json").write_text("{}")
+    found = ev.find_placement_files(tmp_path)
+    assert sorted(found) == ["expert", "human"]
