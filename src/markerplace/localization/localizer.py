@@ -9,8 +9,8 @@ Pipeline for one query RGB image:
    (b) map poses near an implied pose (whether or not they saw the tag); (c) the other map
    images that saw a detected tag. At most ``num_candidates`` in total.
 2. Fill up to ``num_candidates`` with VLAD nearest neighbours.
-3. SIFT matching (query: OpenCV default SIFT) against each candidate, brute-force L2 kNN (k=2)
-   with Lowe's ratio test; 2D-3D correspondences pooled over candidates, keeping for each query
+3. SIFT matching (query: OpenCV default SIFT) against each candidate, exact brute-force L2 kNN
+   (k=2, numpy; equivalent to cv2.BFMatcher) with Lowe's ratio test; 2D-3D correspondences pooled over candidates, keeping for each query
    keypoint the match with the smallest descriptor distance.
 4. ``tag_corners``: add the detected tags' 4 corners with their known 3D corners.
 5. P3P RANSAC + LM (:func:`estimate_pose`).
@@ -93,7 +93,6 @@ class Localizer:
         self.db = db
         self.K = np.asarray(K, dtype=np.float64)
         self.config = config
-        self._matcher = cv2.BFMatcher(cv2.NORM_L2)
         self._centres = db.poses[:, :3, 3] if len(db) else np.zeros((0, 3))
         self._axes = db.poses[:, :3, 2] if len(db) else np.zeros((0, 3))
 
@@ -136,25 +135,39 @@ class Localizer:
 
     # ---- matching --------------------------------------------------------------------------
     def match(self, descriptors: np.ndarray, candidates: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Pooled matches: (L,) query keypoint indices and (L, 3) world points (best per keypoint)."""
-        nq = len(descriptors)
-        best_dist = np.full(nq, np.inf, np.float32)
-        best_pt = np.full((nq, 3), np.nan)
-        if nq < 2:
+        """Pooled matches: (L,) query keypoint indices and (L, 3) world points (best per keypoint).
+
+        Per candidate: exact brute-force L2 2-nearest neighbours (the same as
+        ``cv2.BFMatcher(NORM_L2).knnMatch(k=2)``, computed with one matrix product) and Lowe's
+        ratio test ``d1 < ratio * d2``. Over candidates, each query keypoint keeps the match
+        with the smallest distance.
+        """
+        q = np.asarray(descriptors, dtype=np.float32)
+        nq = len(q)
+        if nq == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3))
+        qq = np.einsum("ij,ij->i", q, q)
+        best_d2 = np.full(nq, np.inf, np.float32)
+        best_pt = np.full((nq, 3), np.nan)
+        r2 = float(self.config.ratio) ** 2
+        rows = np.arange(nq)
         for i in candidates:
             _, desc, pts = self.db.features(i)
             if len(desc) < 2:
                 continue
-            for pair in self._matcher.knnMatch(descriptors, desc, k=2):
-                if len(pair) < 2:
-                    continue
-                m, m2 = pair
-                if m.distance < self.config.ratio * m2.distance and m.distance < best_dist[m.queryIdx]:
-                    best_dist[m.queryIdx] = m.distance
-                    best_pt[m.queryIdx] = pts[m.trainIdx]
-        q = np.flatnonzero(np.isfinite(best_dist))
-        return q.astype(np.int64), best_pt[q]
+            d2 = q @ (-2.0 * desc.T)
+            d2 += qq[:, None]
+            d2 += np.einsum("ij,ij->i", desc, desc)[None, :]
+            two = np.argpartition(d2, 1, axis=1)[:, :2]
+            a, b = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
+            swap = b < a
+            first = np.where(swap, two[:, 1], two[:, 0])
+            d1, d2nd = np.maximum(np.minimum(a, b), 0.0), np.maximum(np.maximum(a, b), 0.0)
+            ok = (d1 < r2 * d2nd) & (d1 < best_d2)
+            best_d2[ok] = d1[ok]
+            best_pt[ok] = pts[first[ok]]
+        sel = np.flatnonzero(np.isfinite(best_d2))
+        return sel.astype(np.int64), best_pt[sel]
 
     # ---- full pipeline ---------------------------------------------------------------------
     def localize(self, rgb: np.ndarray) -> LocalizationResult:
