@@ -118,10 +118,9 @@ def _to_parts(meshes: list, world_from_file: np.ndarray, stem: str) -> list[Mesh
         if colors is not None and len(colors) != len(vertices):
             # face colours: give every face its own three vertices
             vertices, faces, colors, uv, normals = _unshare(vertices, faces, colors, uv, normals)
-        if texture is None and colors is None:
+        if texture is None and colors is None and base is None:
             untextured += 1
-            if base is None:
-                base = GREY
+            base = GREY
         name = str(mesh.metadata.get("name") or f"{stem}_{i}")
         parts.append(
             MeshPart(
@@ -137,11 +136,13 @@ def _to_parts(meshes: list, world_from_file: np.ndarray, stem: str) -> list[Mesh
         )
     if untextured:
         log.warning(
-            "%d of %d mesh parts have no texture or vertex colours; they are drawn in a plain colour "
-            "and will give few image features",
+            "%d of %d mesh parts have no texture, vertex colours or material colour; they are drawn "
+            "in plain grey and will give few image features",
             untextured,
             len(parts),
         )
+    if parts and all(p.texture is None and p.colors is None for p in parts):
+        log.warning("the model has no textures or vertex colours: expect few image features")
     return parts
 
 
