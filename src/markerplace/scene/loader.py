@@ -80,12 +80,13 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     R = up_rotation(up if up is not None else ("y" if is_gltf else "z"))
 
     meshes = _read_trimeshes(path, ext)
-    parts = _to_parts(meshes, R * scale, path.stem)
-    if not parts:
+    if not meshes:
         raise UserError(f"{path}: the file contains no triangle faces (a point cloud or empty mesh?); give a triangle mesh")
-    scene = Scene(name=path.stem, parts=tuple(parts), source=str(path))
-    _check_units(scene, path, scale)
-    return scene
+    world_from_file = R * scale
+    corners = np.concatenate([np.asarray(m.bounds, dtype=float) for m in meshes]) @ world_from_file.T
+    _check_units(corners.min(axis=0), corners.max(axis=0), path, scale)
+    parts = _to_parts(meshes, world_from_file, path.stem)
+    return Scene(name=path.stem, parts=tuple(parts), source=str(path))
 
 
 def _read_trimeshes(path: Path, ext: str) -> list:
@@ -213,9 +214,8 @@ def _unshare(vertices, faces, face_colors, uv, normals):
     )
 
 
-def _check_units(scene: Scene, path: Path, scale: float) -> None:
-    """Fail with a ``--unit-scale`` hint when the model is not plausibly in metres."""
-    lo, hi = scene.bounds
+def _check_units(lo: np.ndarray, hi: np.ndarray, path: Path, scale: float) -> None:
+    """Fail with a ``--unit-scale`` hint when the box [lo, hi] (metres) is implausible for a building."""
     extent = hi - lo
     diagonal = float(np.linalg.norm(extent))
     if diagonal > MAX_DIAGONAL_M:
