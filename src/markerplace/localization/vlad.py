@@ -43,6 +43,18 @@ def _assign(x: np.ndarray, c: np.ndarray, chunk: int = 65536) -> np.ndarray:
     return out
 
 
+def _cluster_sums(x: np.ndarray, labels: np.ndarray, k: int) -> np.ndarray:
+    """(k, D) per-cluster sums of the rows of (N, D) ``x`` (sort + reduceat)."""
+    out = np.zeros((k, x.shape[1]), dtype=x.dtype)
+    if len(x) == 0:
+        return out
+    order = np.argsort(labels, kind="stable")
+    sl = labels[order]
+    starts = np.flatnonzero(np.r_[True, sl[1:] != sl[:-1]])
+    out[sl[starts]] = np.add.reduceat(x[order], starts, axis=0)
+    return out
+
+
 def kmeans(x: np.ndarray, k: int, seed: int = 0, iterations: int = 25) -> np.ndarray:
     """Seeded k-means (k-means++ init, Lloyd). (N, D) float32 -> (k, D) float32 centres.
 
@@ -63,8 +75,7 @@ def kmeans(x: np.ndarray, k: int, seed: int = 0, iterations: int = 25) -> np.nda
     for _ in range(iterations):
         labels = _assign(x, centres)
         counts = np.bincount(labels, minlength=k)
-        sums = np.zeros_like(centres)
-        np.add.at(sums, labels, x)
+        sums = _cluster_sums(x, labels, k)
         new = centres.copy()
         nz = counts > 0
         new[nz] = sums[nz] / counts[nz, None]
@@ -122,7 +133,7 @@ class VladCodebook:
         d = root_sift(descriptors)
         if len(d):
             labels = _assign(d, c)
-            np.add.at(v, labels, d - c[labels])
+            v = _cluster_sums(d - c[labels], labels, len(c))
         norms = np.linalg.norm(v, axis=1, keepdims=True)
         v = v / np.maximum(norms, 1e-12)
         v = np.sign(v) * np.sqrt(np.abs(v))
