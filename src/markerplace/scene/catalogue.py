@@ -188,7 +188,7 @@ def _studio() -> Layout:
             Item("plant", 0.5, 0.5),
         ),
         pictures=(
-            Picture("N", 2.2, 1.0, "astronaut", z_center=1.75),
+            Picture("N", 2.2, 1.0, "astronaut", z_center=1.7),
             Picture("W", 2.5, 1.2, "art:2"),
             Picture("S", 3.0, 0.8, "art:3"),
         ),
@@ -312,7 +312,7 @@ def _apartment() -> Layout:
             Item("rug", 3.0, 3.0),
             wall_item("plant", master_size, "W", 0.8),
         ),
-        pictures=(Picture("N", 3.0, 1.0, "art:6", z_center=1.75), Picture("W", 3.5, 0.8, "ihc")),
+        pictures=(Picture("N", 3.0, 1.0, "art:6", z_center=1.7), Picture("W", 3.5, 0.8, "ihc")),
         lights=2,
     )
     bath = RoomSpec(
