@@ -174,3 +174,19 @@ def test_bad_options(tmp_path, kwargs, needle):
     path = tmp_path / "ok.obj"
     _box([3.0, 3.0, 2.5], [0.0, 0.0, 1.25]).export(path)
     assert needle in _error(tmp_path, str(path), **kwargs)
+
+
+def test_face_colours_become_vertex_colours(tmp_path):
+    mesh = _box([3.0, 3.0, 2.5], [0.0, 0.0, 1.25])
+    face_colors = np.zeros((len(mesh.faces), 4), dtype=np.uint8)
+    face_colors[:, 1] = np.arange(len(mesh.faces)) * 10
+    face_colors[:, 3] = 255
+    mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=face_colors)
+    path = tmp_path / "faces.ply"
+    mesh.export(path)
+    part = load_scene(str(path)).parts[0]
+    assert part.colors.shape == (3 * len(mesh.faces), 4)
+    # each face's three vertices carry that face's colour
+    per_face = part.colors[part.faces]
+    assert np.all(per_face == per_face[:, :1])
+    assert sorted(per_face[:, 0, 1].tolist()) == sorted(face_colors[:, 1].tolist())

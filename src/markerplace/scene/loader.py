@@ -79,50 +79,70 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     is_gltf = ext in (".glb", ".gltf")
     R = up_rotation(up if up is not None else ("y" if is_gltf else "z"))
 
-    meshes = _read_trimeshes(path, ext)
-    if not meshes:
+    instances = _read_instances(path, ext)
+    if not instances:
         raise UserError(f"{path}: the file contains no triangle faces (a point cloud or empty mesh?); give a triangle mesh")
-    world_from_file = R * scale
-    corners = np.concatenate([np.asarray(m.bounds, dtype=float) for m in meshes]) @ world_from_file.T
-    _check_units(corners.min(axis=0), corners.max(axis=0), path, scale)
-    parts = _to_parts(meshes, world_from_file, path.stem)
+    world_from_file = np.eye(4)
+    world_from_file[:3, :3] = R * scale
+    lo, hi = _world_bounds(instances, world_from_file)
+    _check_units(lo, hi, path, scale)
+    parts = _to_parts(instances, world_from_file, path.stem)
     return Scene(name=path.stem, parts=tuple(parts), source=str(path))
 
 
-def _read_trimeshes(path: Path, ext: str) -> list:
-    """All triangle meshes of the file with scene-graph transforms applied (file frame)."""
+def _read_instances(path: Path, ext: str) -> list[tuple]:
+    """Every triangle-mesh instance of the file's scene graph: (name, trimesh.Trimesh, (4, 4) file_from_mesh)."""
     import trimesh
 
     fmt = _FORMAT_NAMES[ext]
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
-        dumped = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+        if not isinstance(loaded, trimesh.Scene):
+            loaded = trimesh.Scene(loaded)
+        out = []
+        for node in loaded.graph.nodes_geometry:
+            transform, geom_name = loaded.graph[node]
+            mesh = loaded.geometry[geom_name]
+            if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) > 0:
+                out.append((str(geom_name), mesh, np.asarray(transform, dtype=np.float64)))
     except Exception as err:  # trimesh raises many kinds of errors on corrupt input
         reason = " ".join(str(err).split())[:200] or type(err).__name__
         raise UserError(f"could not read {path}: {reason}; check the file is a valid {fmt} file") from None
-    return [m for m in dumped if isinstance(m, trimesh.Trimesh) and len(m.faces) > 0]
+    return out
 
 
-def _to_parts(meshes: list, world_from_file: np.ndarray, stem: str) -> list[MeshPart]:
-    """Convert trimesh meshes to :class:`MeshPart` (vertices mapped by the (3, 3) ``world_from_file``)."""
+def _world_bounds(instances: list[tuple], world_from_file: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) min and max corners in metres of all instances' bounding boxes in the world frame."""
+    corners = []
+    for _, mesh, file_from_mesh in instances:
+        (x0, y0, z0), (x1, y1, z1) = np.asarray(mesh.bounds, dtype=float)
+        box = np.array([[x, y, z, 1.0] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)])
+        corners.append(box @ (world_from_file @ file_from_mesh).T)
+    pts = np.concatenate(corners)[:, :3]
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str) -> list[MeshPart]:
+    """Convert mesh instances to :class:`MeshPart` in the world frame ((4, 4) ``world_from_file``)."""
     parts: list[MeshPart] = []
     textures: dict[str, np.ndarray] = {}
     untextured = 0
-    flip = np.linalg.det(world_from_file) < 0
-    for i, mesh in enumerate(meshes):
-        vertices = np.asarray(mesh.vertices, dtype=np.float64) @ world_from_file.T
+    for i, (geom_name, mesh, file_from_mesh) in enumerate(instances):
+        world_from_mesh = world_from_file @ file_from_mesh
+        A, t = world_from_mesh[:3, :3], world_from_mesh[:3, 3]
+        vertices = np.asarray(mesh.vertices, dtype=np.float64) @ A.T + t
         faces = np.asarray(mesh.faces, dtype=np.int64)
-        if flip:
+        if np.linalg.det(A) < 0:  # a mirroring transform flips the winding
             faces = faces[:, ::-1]
         uv, colors, texture, base = _visual(mesh, textures)
-        normals = _file_normals(mesh, world_from_file)
-        if colors is not None and len(colors) != len(vertices):
+        normals = _file_normals(mesh, A)
+        if colors is not None and getattr(mesh.visual, "kind", None) == "face":
             # face colours: give every face its own three vertices
             vertices, faces, colors, uv, normals = _unshare(vertices, faces, colors, uv, normals)
         if texture is None and colors is None and base is None:
             untextured += 1
             base = GREY
-        name = str(mesh.metadata.get("name") or f"{stem}_{i}")
+        name = geom_name or f"{stem}_{i}"
         parts.append(
             MeshPart(
                 name=name,
@@ -166,12 +186,28 @@ def _visual(mesh, textures: dict[str, np.ndarray]):
             texture = _shared_texture(image, textures)
         else:
             uv = None
-        return uv, None, texture, base
+        colors = None
+        attrs = getattr(visual, "vertex_attributes", None)
+        color = attrs.get("color") if attrs is not None else None
+        if color is not None and len(color) == len(mesh.vertices):  # glTF COLOR_0 next to a material
+            colors = _rgba_u8(color)
+        return uv, colors, texture, base
     if kind == "vertex":
         return None, np.ascontiguousarray(visual.vertex_colors, dtype=np.uint8), None, None
     if kind == "face":
         return None, np.ascontiguousarray(visual.face_colors, dtype=np.uint8), None, None
     return None, None, None, None
+
+
+def _rgba_u8(colors) -> np.ndarray:
+    """(N, 3|4) colours, uint8 or float in [0, 1] -> (N, 4) uint8 RGBA."""
+    c = np.asarray(colors)
+    if c.dtype.kind == "f":
+        c = np.rint(np.clip(c, 0.0, 1.0) * 255.0)
+    c = c.astype(np.uint8)
+    if c.shape[1] == 3:
+        c = np.concatenate([c, np.full((len(c), 1), 255, np.uint8)], axis=1)
+    return np.ascontiguousarray(c[:, :4])
 
 
 def _shared_texture(image, textures: dict[str, np.ndarray]) -> np.ndarray:
@@ -187,15 +223,15 @@ def _shared_texture(image, textures: dict[str, np.ndarray]) -> np.ndarray:
     return textures[key]
 
 
-def _file_normals(mesh, world_from_file: np.ndarray) -> np.ndarray | None:
-    """Vertex normals stored in the file (rotated to the world frame), else None."""
+def _file_normals(mesh, world_from_mesh: np.ndarray) -> np.ndarray | None:
+    """Vertex normals stored in the file mapped by the (3, 3) linear part ``world_from_mesh``, else None."""
     try:
         cached = mesh._cache.cache.get("vertex_normals")
     except AttributeError:
         return None
     if cached is None or len(cached) != len(mesh.vertices):
         return None
-    n = np.asarray(cached, dtype=np.float64) @ world_from_file.T
+    n = np.asarray(cached, dtype=np.float64) @ np.linalg.inv(world_from_mesh)  # inverse transpose
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(norm > 0, norm, 1.0)
 
