@@ -414,8 +414,8 @@ def _texture_fns() -> dict:
     """Texture key -> (generator, args). Generators are called at most once per build."""
     return {
         "wall_paint": (tx.painted_wall, ((236, 234, 228),)),
-        "wood_floor": (tx.wood_planks, (512, 4, (150, 105, 65))),
-        "wood_floor_dark": (tx.wood_planks, (512, 5, (105, 70, 45))),
+        "wood_floor": (tx.wood_planks, (512, 8, (150, 105, 65))),
+        "wood_floor_dark": (tx.wood_planks, (512, 10, (105, 70, 45))),
         "tiles": (tx.floor_tiles, (512, 4)),
         "bath_tiles": (tx.floor_tiles, (256, 8, (225, 232, 235), (150, 160, 165))),
         "carpet": (tx.carpet, (256,)),
