@@ -163,12 +163,15 @@ def test_shared_texture_uploaded_once():
     assert (res.depth > 0).sum() > 3 * 300
 
 
-def test_occlusion_nearer_surface_wins():
+@pytest.mark.parametrize("near_first", [False, True])
+def test_occlusion_nearer_surface_wins(near_first):
     near = quad([2, 0, 1.5], [0, 0.3, 0], [0, 0, 0.3], color=(1, 0, 0, 1))
-    res = render(Scene("occ", (wall_scene().parts[0], near)))
+    far = wall_scene().parts[0]
+    res = render(Scene("occ", (near, far) if near_first else (far, near)))
     assert res.depth[225, 300] == pytest.approx(2.0, abs=1e-4)
     assert res.depth[10, 10] == pytest.approx(3.0, abs=1e-3)
     assert res.rgb[225, 300, 0] > 200 and res.rgb[225, 300, 1] == 0
+    np.testing.assert_allclose(res.normal[225, 300], [-1, 0, 0], atol=1e-6)
 
 
 def test_determinism_and_set_markers_changes_only_marker_region():
@@ -229,3 +232,23 @@ def test_write_render_outputs(tmp_path):
     np.testing.assert_array_equal(depth, res.depth)
     normal_img = np.asarray(Image.open(paths[2]))
     np.testing.assert_array_equal(normal_img[225, 300], [0, 128, 128])  # n = (-1, 0, 0)
+
+
+def test_cli_render_writes_three_files(tmp_path):
+    import trimesh
+
+    from markerplace.cli import main
+
+    # A 6 x 4 x 3 m closed box room as a PLY file (z up, metres); the camera stands inside.
+    room = trimesh.creation.box(extents=[6.0, 4.0, 3.0])
+    room.apply_translation([3.0, 2.0, 1.5])
+    path = tmp_path / "room.ply"
+    room.export(path)
+    out = tmp_path / "out" / "x"
+    assert main(["render", str(path), "--pose", "3,2,1.5,0", "--out", str(out), "--width", "160", "--height", "120"]) == 0
+    names = sorted(p.name for p in out.parent.iterdir())
+    assert names == ["x_depth.npy", "x_normal.png", "x_rgb.png"]
+    depth = np.load(out.parent / "x_depth.npy", allow_pickle=False)
+    assert depth.shape == (120, 160)
+    # Straight ahead is the wall at x = 6, 3 m away.
+    assert depth[60, 80] == pytest.approx(3.0, abs=1e-3)
