@@ -194,6 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
+    from .evaluate_cli import add_evaluate_parser
+
+    add_evaluate_parser(sub)
+
     return parser
 
 
