@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import socket
-import time
 
 import numpy as np
 import pytest
@@ -181,18 +180,6 @@ def test_load_scene_caches_per_name_and_seed():
 def test_unknown_builtin_raises():
     with pytest.raises(UserError, match="unknown built-in scene"):
         get_layout("castle")
-
-
-def test_build_times():
-    best = min(_timed(build_builtin, "tiny", 7) for _ in range(3))
-    assert best < 0.5, best
-    assert _timed(build_builtin, "office", 7) < 3.0
-
-
-def _timed(fn, *args) -> float:
-    t = time.perf_counter()
-    fn(*args)
-    return time.perf_counter() - t
 
 
 def test_apartment_has_identical_twin_rooms():
