@@ -9,8 +9,11 @@ Prints ``name: value`` lines.
 * part b, greedy: OMP with k = ``--k`` on ``--grid`` x ``--grid`` locations x 8 yaws (>= 10,000
   poses) and ``--candidates`` wall candidates ('paper' marker model, visibility rules), plain
   vs lazy: seconds, evaluations, identical picks. Goal: lazy < 5 s.
+* part c, end to end: ``plan office -k 20`` (discretize, observe, similarity, score, place) in
+  a fresh run directory: seconds per stage and peak resident memory of the main process and of
+  the largest worker. Goal: < 5 min, < 4 GB.
 
-    .venv/bin/python benchmarks/placement.py [--part a|b|all] [--seed 0]
+    .venv/bin/python benchmarks/placement.py [--part a|b|c|all] [--seed 0]
 
 To add a part, write ``def part_x(args) -> None`` printing ``name: value`` lines and register it
 in ``PARTS``.
@@ -189,7 +192,38 @@ def part_b(args) -> None:
     emit("greedy_first_gains", " ".join(f"{g:.3f}" for g in lazy_r.gains[:5]))
 
 
-PARTS: dict[str, Callable] = {"a": part_a, "b": part_b}
+def part_c(args) -> None:
+    """End to end `plan SCENE -k 20` in a fresh run directory: seconds per stage, peak memory."""
+    import resource
+    import tempfile
+
+    from markerplace.observe import SceneSpec
+    from markerplace.planner import PlacementConfig, PlanConfig, place, prepare
+
+    config = PlanConfig(placement=PlacementConfig(k=args.k))
+    with tempfile.TemporaryDirectory() as run_dir:
+        t0 = time.perf_counter()
+        data = prepare(SceneSpec(args.scene), config, run_dir, progress=False)
+        t1 = time.perf_counter()
+        result = place(data, config.placement, progress=False)
+        t2 = time.perf_counter()
+    emit("plan_scene", args.scene)
+    emit("plan_poses", len(data.disc.world_from_cam))
+    emit("plan_candidates", data.num_candidates)
+    for stage, seconds in data.timings.items():
+        emit(f"plan_{stage}_s", round(seconds, 2))
+    emit("plan_place_s", round(t2 - t1, 3))
+    emit("plan_total_s", round(t2 - t0, 2))
+    emit("plan_goal_total_s", 300)
+    emit("plan_markers", len(result.markers))
+    main_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    child_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    emit("plan_peak_rss_main_mb", round(main_mb, 1))
+    emit("plan_peak_rss_worker_mb", round(child_mb, 1))
+    emit("plan_goal_peak_mb", 4096)
+
+
+PARTS: dict[str, Callable] = {"a": part_a, "b": part_b, "c": part_c}
 
 
 def main(argv=None) -> None:
@@ -202,7 +236,8 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=3, help="part a: timing repeats (best of)")
     ap.add_argument("--grid", type=int, default=36, help="part b: locations per side (x 8 yaws)")
     ap.add_argument("--candidates", type=int, default=500, help="part b: candidate markers")
-    ap.add_argument("--k", type=int, default=20, help="part b: markers to place")
+    ap.add_argument("--k", type=int, default=20, help="parts b, c: markers to place")
+    ap.add_argument("--scene", default="office", help="part c: scene to plan in (default office)")
     args = ap.parse_args(argv)
     for name, fn in PARTS.items():
         if args.part in (name, "all"):
