@@ -564,7 +564,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
              ", ".join(sorted({p.method for p in placements})))
 
     t0 = time.perf_counter()
-    is_free = ev.free_space_checker(disc.occupancy, disc.origin, disc.resolution, config.min_clearance)
+    is_free = ev.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.min_clearance)
     test_poses = {}
     base_key = cache.hash_of("testbed-v1", cache.scene_hash(scene), map_poses)
     for i, ts in enumerate(config.test_sets):
