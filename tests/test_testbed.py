@@ -139,3 +139,53 @@ def test_find_placement_files(tmp_path):
     (tmp_path / "expert" / "config.json").write_text("{}")
     found = ev.find_placement_files(tmp_path)
     assert sorted(found) == ["expert", "human"]
+
+
+# --- end to end --------------------------------------------------------------------------------
+
+FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
+
+
+def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
+    import csv
+
+    from markerplace.cli import main
+
+    out = tmp_path / "eval"
+    args = ["evaluate", "tiny", "--out", str(out), "--tests", "20", "--k", "2", "--runs", "1", *FAST]
+    assert main(args) == 0
+    for name in ("recall.csv", "tables.md", "recall_vs_k.png", "query_errors.npz", "timings.json", "config.json",
+                 "test_poses_weighted.npz", "test_poses_uniform.npz"):
+        assert (out / name).stat().st_size > 0, name
+    rows = list(csv.DictReader((out / "recall.csv").open()))
+    got = {(r["method"], r["run"], r["k"], r["test_set"], r["threshold"]) for r in rows}
+    expected = {(m, "0", k, ts, th) for m, k in [("none", "0"), ("omp", "2"), ("random", "2"), ("uniform", "2")]
+                for ts in ("weighted", "uniform") for th in ("1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg")}
+    assert got == expected and len(rows) == len(expected)
+    assert all(r["scene"] == "tiny" and r["n_tests"] == "20" and 0.0 <= float(r["recall"]) <= 1.0 for r in rows)
+    for r in rows:  # recall is monotone in the threshold
+        if r["threshold"] == "1cm/1deg":
+            loose = next(x for x in rows if x["threshold"] == "1m/30deg" and
+                         (x["method"], x["k"], x["test_set"]) == (r["method"], r["k"], r["test_set"]))
+            assert float(loose["recall"]) >= float(r["recall"])
+    assert "| tiny (" in (out / "tables.md").read_text()
+    errs = np.load(out / "query_errors.npz")
+    assert errs["weighted_t_err"].shape == (4, 20) and errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform"]
+    # same test poses for every method: one file per test set, identical on a re-run
+    poses = ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
+    results = sorted((out / "cache").glob("results_*.npz"))
+    assert len(results) == 8
+    stamps = [p.stat().st_mtime_ns for p in results]
+    assert main(args) == 0  # resume: every placement's query results are reused
+    assert [p.stat().st_mtime_ns for p in results] == stamps
+    assert np.array_equal(ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam, poses)
+    assert list(csv.DictReader((out / "recall.csv").open())) == rows
+
+
+def test_evaluate_bad_option_is_one_line_error(tmp_path, capsys):
+    from markerplace.cli import main
+
+    assert main(["evaluate", "tiny", "--out", str(tmp_path / "x"), "--tag-scale", "0", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--tag-scale" in err[0]
+    assert main(["evaluate", "tiny", "--out", str(tmp_path / "x"), "--k", "5,a", "--quiet"]) == 2
