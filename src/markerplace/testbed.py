@@ -486,15 +486,15 @@ class BaseImages:
             self.features.save(feat_dir)
             cache.mark_done(feat_dir / "offsets.npy", feat_key)
             vis = np.stack([res[i][1] for i in range(len(world_from_cam))]) if len(world_from_cam) else None
-        if vis is None:
-            if cache.is_fresh(vis_path, vis_key):
-                vis = np.load(vis_path, allow_pickle=False)
-            else:
+        if vis is None and cache.is_fresh(vis_path, vis_key):
+            vis = np.load(vis_path, allow_pickle=False)
+        else:
+            if vis is None:  # features cached, markers changed: depth-only renders
                 jobs = [(i, world_from_cam[i]) for i in range(len(world_from_cam))]
                 got = dict(testbed._run(_visibility_job, jobs, f"{name} (marker visibility)"))
                 vis = np.stack([got[i] for i in range(len(world_from_cam))]).reshape(len(world_from_cam), -1)
-        write_npy(vis_path, vis)
-        cache.mark_done(vis_path, vis_key)
+            write_npy(vis_path, vis)
+            cache.mark_done(vis_path, vis_key)
         self.visibility = vis.reshape(len(world_from_cam), len(testbed.union))
 
 
