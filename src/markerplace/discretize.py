@@ -298,7 +298,7 @@ def find_storeys(mesh: _Mesh, min_area_frac: float = 0.2, min_separation: float 
     z, a = z[order], a[order]
     split = np.flatnonzero(np.diff(z) > gap) + 1
     groups = np.split(np.arange(len(z)), split)
-    cz = np.array([np.average(z[g], weights=a[g]) for g in groups])
+    cz = np.array([_weighted_median(z[g], a[g]) for g in groups])  # rugs do not lift the floor
     ca = np.array([a[g].sum() for g in groups])
     floors: list[float] = []
     for zc, ac in zip(cz, ca):
@@ -310,6 +310,12 @@ def find_storeys(mesh: _Mesh, min_area_frac: float = 0.2, min_separation: float 
             continue
         floors.append(float(zc))
     return floors
+
+
+def _weighted_median(v: np.ndarray, w: np.ndarray) -> float:
+    o = np.argsort(v, kind="stable")
+    cw = np.cumsum(w[o])
+    return float(v[o][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
 # ----------------------------------------------------------------------------------------------
