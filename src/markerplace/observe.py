@@ -15,11 +15,8 @@ Rendering and feature extraction are spread over a process pool, one GL context 
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import h5py
 import numpy as np
@@ -27,6 +24,7 @@ import numpy as np
 from .geometry import Intrinsics, invert
 from .io_utils import atomic_path
 from .localization.features import SIFT_SCORING, SiftConfig, extract_sift, lift_to_3d
+from .workers import default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -150,6 +148,11 @@ def _worker_init(scene_spec: SceneSpec, config: ObserveConfig, samples_world: np
     _WORKER["samples"] = samples_world
 
 
+def _pool_worker_init(*args) -> None:
+    single_threaded_libraries()
+    _worker_init(*args)
+
+
 def _observe_one(args: tuple[int, np.ndarray, np.ndarray]):
     index, world_from_cam, candidate_mask = args
     renderer = _WORKER["renderer"]
@@ -186,7 +189,7 @@ def observe(scene_spec: SceneSpec, world_from_cam: np.ndarray, candidate_in_view
     N = len(world_from_cam)
     C = len(candidate_world_from_marker)
     samples = marker_sample_points(candidate_world_from_marker, tag_size) if C else np.zeros((0, 5, 3))
-    workers = config.workers or min(os.cpu_count() or 1, 4)
+    workers = default_workers(config.workers)
     jobs = [(i, world_from_cam[i], candidate_in_view[i] if C else np.zeros(0, bool)) for i in range(N)]
     results: list = [None] * N
     bar = tqdm(total=N, desc="observe", unit="pose", disable=not progress, leave=False)
@@ -200,8 +203,7 @@ def observe(scene_spec: SceneSpec, world_from_cam: np.ndarray, candidate_in_view
         finally:
             _WORKER.pop("renderer").close()
     else:
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(workers, initializer=_worker_init, initargs=(scene_spec, config, samples)) as pool:
+        with spawn_pool(workers, _pool_worker_init, (scene_spec, config, samples)) as pool:
             for r in pool.imap_unordered(_observe_one, jobs, chunksize=8):
                 results[r[0]] = r
                 bar.update()
