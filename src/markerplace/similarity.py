@@ -43,10 +43,14 @@ class SimilarityConfig:
         method: ``"auto"``, ``"exact"`` or ``"approx"`` (see module docstring).
         exact_max_points: ``auto`` uses ``exact`` up to this many points.
         pca_dims: dimensions of the reduced space used to generate candidates.
-        num_cells: k-means cells of the inverted file; 0 = ``clip(P / 400, 16, 4096)``.
-        nprobe: cells searched per point (more = higher recall, slower).
+        num_cells: k-means cells of the inverted file; 0 = ``clip(sqrt(nprobe P), 16, 8192)``.
+        nprobe: at most this many cells are searched per cell (those that can hold a partner,\n            nearest first by the triangle-inequality bound); more = higher recall, slower.
         kmeans_sample: points used to fit PCA and k-means.
         kmeans_iters: k-means iterations.
+        merge_radius: cells whose centroids lie within this fraction of the look-alike radius of
+            a leader cell are searched as one (k-means splits dense blobs of look-alikes into
+            many small cells, which a per-cell probe limit would otherwise miss).
+        max_merge: at most this many k-means cells form one merged cell (bounds the cost).
         block: maximum elements of one distance block (memory: 4 bytes each, a few at a time).
         seed: seed of the sampling and k-means initialisation.
     """
@@ -57,9 +61,11 @@ class SimilarityConfig:
     exact_max_points: int = 30000
     pca_dims: int = 32
     num_cells: int = 0
-    nprobe: int = 12
-    kmeans_sample: int = 100000
-    kmeans_iters: int = 12
+    nprobe: int = 16
+    kmeans_sample: int = 50000
+    kmeans_iters: int = 8
+    merge_radius: float = 0.7
+    max_merge: int = 16
     block: int = 4_000_000
     seed: int = 0
 
@@ -105,29 +111,27 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     return out
 
 
-def _count_block(Xq, Pq, gq, Xm, Pm, gm, cos_t: float, min_d2: float, counts: np.ndarray,
-                 cand: np.ndarray | None = None) -> None:
-    """Add to ``counts[gq]`` the exact matches of query rows against member rows.
+def _count_block(X, Pw, q: np.ndarray, m: np.ndarray, cos_t: float, min_d2: float, counts: np.ndarray,
+                 qi: np.ndarray | None = None, mj: np.ndarray | None = None) -> None:
+    """Add to ``counts[q]`` the exact look-alikes of rows ``q`` among rows ``m`` of X.
 
-    ``cand`` (optional (Q, M) bool) restricts the pairs checked; dense blocks use GEMM.
+    Args:
+        X: (P, D) unit descriptors; Pw: (P, 3) points; q, m: global row indices.
+        qi, mj: optional candidate pairs (positions in q and m); only those are checked
+            (exactly, in the full dimension). Without them all pairs are checked by one GEMM.
     """
-    if cand is not None:
-        nc = int(cand.sum())
-        if nc == 0:
-            return
-        if nc < 0.05 * cand.size:
-            qi, mj = np.nonzero(cand)
-            dots = np.einsum("ij,ij->i", Xq[qi], Xm[mj])
-            d2 = np.sum((Pq[qi] - Pm[mj]) ** 2, axis=1)
-            ok = (dots > cos_t) & (d2 > min_d2) & (gq[qi] != gm[mj])
-            np.add.at(counts, gq[qi[ok]], 1)
-            return
-    sim = (Xq @ Xm.T) > cos_t
-    if cand is not None:
-        sim &= cand
-    d2 = (np.sum(Pq * Pq, axis=1)[:, None] + np.sum(Pm * Pm, axis=1)[None] - 2.0 * (Pq @ Pm.T))
-    ok = sim & (d2 > min_d2) & (gq[:, None] != gm[None, :])
-    counts[gq] += ok.sum(axis=1)
+    if qi is None:
+        qi, mj = np.nonzero((X[q] @ X[m].T) > cos_t)
+        gq, gm = q[qi], m[mj]
+    else:
+        gq, gm = q[qi], m[mj]
+        keep = np.einsum("ij,ij->i", X[gq], X[gm]) > cos_t
+        gq, gm = gq[keep], gm[keep]
+    if len(gq) == 0:
+        return
+    d2 = np.sum((Pw[gq] - Pw[gm]) ** 2, axis=1)
+    ok = (d2 > min_d2) & (gq != gm)
+    np.add.at(counts, gq[ok], 1)
 
 
 def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
@@ -144,8 +148,7 @@ def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
     rows = max(1, config.block // max(P, 1))
     min_d2 = float(config.min_distance) ** 2
     for s in range(0, P, rows):
-        e = min(P, s + rows)
-        _count_block(X[s:e], Pw[s:e], idx[s:e], X, Pw, idx, config.cos_threshold, min_d2, counts)
+        _count_block(X, Pw, idx[s:s + rows], idx, config.cos_threshold, min_d2, counts)
     return counts.astype(np.int32)
 
 
@@ -193,39 +196,84 @@ def count_similar_approx(descriptors: np.ndarray, points_world: np.ndarray,
         return counts.astype(np.int32)
     rng = np.random.default_rng(config.seed)
     sample = X if P <= config.kmeans_sample else X[np.sort(rng.choice(P, config.kmeans_sample, replace=False))]
-    mu = sample.mean(axis=0)
+    mu = sample.mean(axis=0, dtype=np.float64)
     d = min(config.pca_dims, X.shape[1])
-    _, _, Vt = np.linalg.svd(sample - mu, full_matrices=False)
-    B = np.ascontiguousarray(Vt[:d].T, dtype=np.float32)  # (D, d) orthonormal columns
-    Y = (X - mu) @ B
-    K = config.num_cells or int(np.clip(P // 400, 16, 4096))
+    cov = np.cov((sample - mu.astype(np.float32)).T.astype(np.float64))
+    _, V = np.linalg.eigh(cov)
+    B = np.ascontiguousarray(V[:, ::-1][:, :d], dtype=np.float32)  # (D, d) orthonormal columns
+    Y = (X - mu.astype(np.float32)) @ B
+    nprobe_req = max(1, config.nprobe)
+    K = config.num_cells or int(np.clip(np.sqrt(nprobe_req * P), 16, 8192))
     K = min(K, len(sample))
-    nprobe = min(config.nprobe, K)
-    C = _kmeans(sample @ B - mu @ B, K, config.kmeans_iters, rng)
-    probes = _nearest(Y, C, nprobe)  # (P, nprobe)
-    cell = probes[:, 0]  # a point's own cell is its nearest centroid
-    order = np.argsort(cell, kind="stable")
-    starts = np.searchsorted(cell[order], np.arange(K + 1))
-    # queries grouped by probed cell
-    q_pt = np.repeat(np.arange(P), nprobe)
-    q_cell = probes.reshape(-1)
-    q_order = np.argsort(q_cell, kind="stable")
-    q_pt = q_pt[q_order]
-    q_starts = np.searchsorted(q_cell[q_order], np.arange(K + 1))
-    thr = (2.0 - 2.0 * config.cos_threshold) * (1.0 + 1e-4) + 1e-6
-    min_d2 = float(config.min_distance) ** 2
-    yy = np.sum(Y * Y, axis=1)
-    for c in range(K):
-        members = order[starts[c]:starts[c + 1]]
-        queries = q_pt[q_starts[c]:q_starts[c + 1]]
-        if len(members) == 0 or len(queries) == 0:
+    C = _kmeans(Y if P <= config.kmeans_sample else (sample - mu.astype(np.float32)) @ B, K, config.kmeans_iters, rng)
+    thr = (2.0 - 2.0 * config.cos_threshold) * (1.0 + 1e-4) + 1e-6  # squared radius
+    r = float(np.sqrt(thr))
+    # k-means splits a dense blob of look-alikes into many cells; merge cells whose centroids lie
+    # within r of a leader (no chaining: a merged cell spans at most 2 r around its leader)
+    sub = _nearest(Y, C, 1)[:, 0]
+    size = np.bincount(sub, minlength=K)
+    cc = np.sum(C * C, axis=1)
+    merged = np.full(K, -1, dtype=np.int64)
+    leaders: list[int] = []
+    nsub = np.ones(K, dtype=np.int64)  # sub-cells per merged cell (indexed by merged id)
+    for k in np.argsort(-size, kind="stable"):
+        if size[k] == 0:
             continue
-        Ym, Xm, Pm = Y[members], X[members], Pw[members]
-        rows = max(1, config.block // len(members))
-        for s in range(0, len(queries), rows):
-            qs = queries[s:s + rows]
-            d2 = yy[qs][:, None] + yy[members][None] - 2.0 * (Y[qs] @ Ym.T)
-            _count_block(X[qs], Pw[qs], qs, Xm, Pm, members, config.cos_threshold, min_d2, counts, cand=d2 < thr)
+        if leaders:
+            L = np.asarray(leaders)
+            dl = cc[L] + cc[k] - 2.0 * (C[L] @ C[k])
+            dl[nsub[:len(L)] >= config.max_merge] = np.inf
+            j = int(np.argmin(dl))
+            if dl[j] < (config.merge_radius * r) ** 2:
+                merged[k] = j
+                nsub[j] += 1
+                continue
+        merged[k] = len(leaders)
+        leaders.append(int(k))
+    cell = merged[sub]
+    M = len(leaders)
+    order = np.argsort(cell, kind="stable")
+    starts = np.searchsorted(cell[order], np.arange(M + 1))
+    gid = order
+    X, Y, Pw = X[order], Y[order], Pw[order]
+    cell = cell[order]
+    sub = sub[order]
+    # per merged cell: radius around each sub-centroid, for the triangle-inequality bound
+    rad = np.zeros(K, dtype=np.float32)
+    np.maximum.at(rad, sub, np.linalg.norm(Y - C[sub], axis=1))
+    # ||a - b||^2 < thr  <=>  2 a.b - |a|^2 - |b|^2 > -thr: one GEMM with augmented rows
+    yy = np.sum(Y * Y, axis=1)
+    Yq_aug = np.hstack([2.0 * Y, -yy[:, None], -np.ones((P, 1), np.float32)])
+    Ym_aug = np.hstack([Y, np.ones((P, 1), np.float32), yy[:, None]])
+    min_d2 = float(config.min_distance) ** 2
+    local = np.zeros(P, dtype=np.int64)
+    used = size > 0
+    for c in range(M):
+        q0, q1 = starts[c], starts[c + 1]
+        subs = np.unique(sub[q0:q1])
+        # lower bound of partner distance per target sub-cell, over this cell's sub-cells
+        dcs = np.sqrt(np.maximum(cc[subs][:, None] + cc[None] - 2.0 * (C[subs] @ C.T), 0.0))
+        gap_sub = np.min(dcs - rad[subs][:, None], axis=0) - rad
+        gap_sub[~used] = np.inf
+        gap = np.full(M, np.inf)
+        np.minimum.at(gap, merged[used], gap_sub[used])
+        targets = np.flatnonzero(gap < r)
+        # at most nprobe merged cells, nearest first by the bound (the only approximation)
+        if len(targets) > nprobe_req:
+            targets = targets[np.argsort(gap[targets], kind="stable")[:nprobe_req]]
+        midx = np.concatenate([np.arange(starts[t], starts[t + 1]) for t in targets])
+        rows = max(1, config.block // len(midx))
+        Ym = Ym_aug[midx]
+        for s0 in range(q0, q1, rows):
+            qidx = np.arange(s0, min(q1, s0 + rows))
+            qi, mj = np.nonzero((Yq_aug[qidx] @ Ym.T) > -thr)
+            if len(qi) == 0:
+                continue
+            if len(qi) > 0.05 * len(qidx) * len(midx):  # dense: verify the block by GEMM
+                _count_block(X, Pw, qidx, midx, config.cos_threshold, min_d2, local)
+            else:
+                _count_block(X, Pw, qidx, midx, config.cos_threshold, min_d2, local, qi, mj)
+    counts[gid] = local
     return counts.astype(np.int32)
 
 
