@@ -11,11 +11,13 @@ Methods:
     * ``exact``: blocked all-pairs (BLAS), O(P^2); for tests and small inputs.
     * ``approx``: an inverted-file search. PCA to ``pca_dims`` dimensions (an orthogonal
       projection never lengthens a difference, so the reduced-space radius test keeps every true
-      pair), k-means cells in the reduced space, and for each point only the ``nprobe`` cells
-      with the nearest centroids are searched; candidates are then verified exactly in 128-D
+      pair), k-means cells in the reduced space; cells whose centroids nearly coincide (a dense
+      blob of look-alikes that k-means over-splits) are merged, at most ``max_merge`` at a time.
+      Each cell searches the cells that the triangle inequality cannot rule out, at most
+      ``nprobe`` of them, nearest first; candidates are verified exactly in the full dimension
       (cosine and 3D distance). The only approximation is the probe limit: a look-alike in a
-      cell that is not among the point's ``nprobe`` nearest is missed, so counts can only be
-      too low. :func:`measure_error` reports the error against ``exact``.
+      cell that was not searched is missed, so counts can only be too low.
+      :func:`measure_error` reports the error against ``exact``.
     * ``auto``: ``exact`` below ``exact_max_points`` points, else ``approx``.
 """
 
