@@ -50,7 +50,9 @@ class DiscretizeConfig:
             normals differ by more than ``normal_diff_deg``.
         normal_diff_deg: normals differing by more than this (degrees) count as different.
         tag_size: edge of the tag that must fit flat on the wall, metres.
-        tag_margin: extra border around the tag that must be flat too, metres.
+        tag_border: white border around the black square that must be flat too, as a fraction
+            of ``tag_size`` per side (0.25: the 2-bit quiet zone of the rendered 8-bit tag,
+            see :mod:`markerplace.render.tags`).
         flatness_tol: tag corners (and the sampled square) on one plane within this, metres.
         max_normal_z: |n_z| of a candidate's surface normal must be below this (near-vertical).
         scan_rays: rays per 360-degree scan.
@@ -74,7 +76,7 @@ class DiscretizeConfig:
     marker_spacing: float = 1.0
     normal_diff_deg: float = 30.0
     tag_size: float = 0.4
-    tag_margin: float = 0.05
+    tag_border: float = 0.25
     flatness_tol: float = 0.02
     max_normal_z: float = 0.2
     scan_rays: int = 720
@@ -532,7 +534,7 @@ def _tag_fits(mesh: _Mesh, centers: np.ndarray, normals: np.ndarray, config: Dis
     M = len(centers)
     if M == 0:
         return np.zeros(0, dtype=bool)
-    h = config.tag_size / 2 + config.tag_margin
+    h = config.tag_size * (0.5 + config.tag_border)
     a = np.linspace(-h, h, n_side)
     A, B = np.meshgrid(a, a)
     A, B = A.ravel(), B.ravel()
