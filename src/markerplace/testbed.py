@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
-import os
 import shutil
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
@@ -34,6 +34,7 @@ from .geometry import Intrinsics, invert
 from .io_utils import atomic_path, write_npy
 from .localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
 from .markers import Marker
+from .workers import default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -216,12 +217,10 @@ _W: dict = {}
 
 
 def _worker_init(scene_spec, config: TestbedConfig, samples: np.ndarray, localize_args: dict | None) -> None:
-    import cv2
-
     from .render.renderer import Renderer
 
     if mp.current_process().name != "MainProcess":
-        cv2.setNumThreads(1)  # parallelism is across worker processes
+        single_threaded_libraries()  # parallelism is across worker processes
     _W["renderer"] = Renderer(scene_spec.load(), config.intrinsics)
     _W["config"] = config
     _W["samples"] = samples
@@ -318,30 +317,8 @@ def _tag_detections(feats: ImageFeatures) -> list:
 
 
 def localize_features(localizer, feats: ImageFeatures):
-    """Localize precomputed query features with a :class:`~markerplace.localization.localizer.Localizer`.
-
-    Same steps as ``Localizer.localize(rgb)`` (retrieval with tags, VLAD, ratio-test matching,
-    optional tag corners, P3P RANSAC + LM) but on features extracted once, so a query whose view
-    holds no marker is not re-rendered for every placement. Uses ``localizer.localize_features``
-    when the localizer provides it.
-    """
-    from .localization.pnp import estimate_pose
-
-    tags = _tag_detections(feats)
-    desc = feats.descriptors.astype(np.float32)
-    if hasattr(localizer, "localize_features"):
-        return localizer.localize_features(feats.keypoints, desc, tags)
-    c = localizer.config
-    candidates = localizer.retrieve(localizer.db.codebook.vlad(desc), tags if c.use_tags else [])
-    qidx, pts = localizer.match(desc, candidates)
-    px = feats.keypoints[qidx].astype(np.float64)
-    if c.tag_corners:
-        for det in tags:
-            marker = localizer.db.markers.get(det.tag_id)
-            if marker is not None:
-                pts = np.concatenate([pts, marker.corners_world()])
-                px = np.concatenate([px, det.corners])
-    return estimate_pose(pts, px, localizer.K, c.pnp, seed=c.seed)
+    """Localize precomputed query features (extracted once, reused across placements)."""
+    return localizer.localize_features(feats.keypoints, feats.descriptors.astype(np.float32), _tag_detections(feats))
 
 
 def _localize_job(job):
@@ -366,7 +343,6 @@ def _localize_job(job):
 
 # --- main side ---------------------------------------------------------------------------------
 
-_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 class Testbed:
     """Owns the worker pool. Use as a context manager.
@@ -389,33 +365,21 @@ class Testbed:
         self.samples = marker_samples(self.union, config.visibility_grid)
         self.progress = progress
         self.localize_args = localize_args or {}
-        self.workers = config.workers or min(os.cpu_count() or 1, 4)
+        self.workers = default_workers(config.workers)
         self._pool = None
+        self._stack = ExitStack()
 
     def __enter__(self) -> "Testbed":
         initargs = (self.scene_spec, self.config, self.samples, self.localize_args)
         if self.workers <= 1:
             _worker_init(*initargs)
         else:
-            # One BLAS / OpenMP thread per worker: parallelism is across processes, and threaded
-            # BLAS on small matrices (descriptor matching, VLAD) is several times slower when
-            # the workers already fill the cores. Spawned children read these at start-up.
-            saved = {k: os.environ.get(k) for k in _THREAD_ENV}
-            os.environ.update({k: "1" for k in _THREAD_ENV})
-            try:
-                self._pool = mp.get_context("spawn").Pool(self.workers, initializer=_worker_init, initargs=initargs)
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
+            self._pool = self._stack.enter_context(spawn_pool(self.workers, _worker_init, initargs))
         return self
 
     def __exit__(self, *exc) -> None:
         if self._pool is not None:
-            self._pool.terminate() if exc[0] is not None else self._pool.close()
-            self._pool.join()
+            self._stack.__exit__(*exc)
             self._pool = None
         else:
             _worker_close()

@@ -173,20 +173,37 @@ class Localizer:
     def localize(self, rgb: np.ndarray) -> LocalizationResult:
         """Estimate the ``world_from_cam`` of an (H, W, 3) uint8 RGB query image."""
         c = self.config
-        timing: dict[str, float] = {}
         t0 = time.perf_counter()
         kp, desc = extract_sift(rgb, c.sift)
         t1 = time.perf_counter()
-        timing["features"] = t1 - t0
         tags = detect_tags(rgb) if (c.use_tags or c.tag_corners) else []
         t2 = time.perf_counter()
-        timing["tags"] = t2 - t1
+        result = self.localize_features(kp, desc, tags)
+        result.timing.update(features=t1 - t0, tags=t2 - t1, total=time.perf_counter() - t0)
+        return result
+
+    def localize_features(self, keypoints: np.ndarray, descriptors: np.ndarray,
+                          tags: list[TagDetection]) -> LocalizationResult:
+        """Localize precomputed query features.
+
+        Args:
+            keypoints: (K, 2) pixel xy of the query's SIFT keypoints.
+            descriptors: (K, 128) float32 SIFT descriptors (``config.sift`` parameters).
+            tags: tag detections in the query (ignored unless tags or tag corners are on).
+
+        Returns:
+            the estimate (``world_from_cam`` None on failure) with retrieval and match details.
+        """
+        c = self.config
+        timing: dict[str, float] = {}
+        t2 = time.perf_counter()
+        desc = np.asarray(descriptors, dtype=np.float32)
         qv = self.db.codebook.vlad(desc)
         candidates = self.retrieve(qv, tags if c.use_tags else [])
         t3 = time.perf_counter()
         timing["retrieval"] = t3 - t2
         qidx, pts = self.match(desc, candidates)
-        px = kp[qidx].astype(np.float64)
+        px = np.asarray(keypoints)[qidx].astype(np.float64)
         if c.tag_corners:
             for det in tags:
                 marker = self.db.markers.get(det.tag_id)
@@ -196,9 +213,7 @@ class Localizer:
         t4 = time.perf_counter()
         timing["matching"] = t4 - t3
         est = estimate_pose(pts, px, self.K, c.pnp, seed=c.seed)
-        t5 = time.perf_counter()
-        timing["pnp"] = t5 - t4
-        timing["total"] = t5 - t0
+        timing["pnp"] = time.perf_counter() - t4
         return LocalizationResult(
             world_from_cam=est.world_from_cam,
             num_inliers=est.num_inliers,
