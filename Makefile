@@ -15,3 +15,5 @@ test-slow: setup
 
 bench: setup
 	.venv/bin/python benchmarks/render.py
+	.venv/bin/python benchmarks/placement.py
+	.venv/bin/python benchmarks/similarity.py
