@@ -121,11 +121,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     progress = not args.quiet
     data = prepare(spec, config, args.out, existing=existing, progress=progress)
     placement = place(data, config.placement, existing=existing, progress=progress)
-    from .planner import _apply
-
-    existing_info = _apply(data.base_info, data.coverages[data.num_candidates:])
     summary = write_plan_outputs(args.out, data=data, placement=placement,
-                                 first_gain=first_pick_gain(data, placement, existing_info), config=config,
+                                 first_gain=first_pick_gain(data, placement), config=config,
                                  method=config.placement.method, scene_source=args.scene, existing=existing)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],

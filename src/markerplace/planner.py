@@ -242,7 +242,8 @@ class Placement:
     q: float
 
 
-def _apply(info: np.ndarray, coverages: Sequence) -> np.ndarray:
+def apply_coverages(info: np.ndarray, coverages: Sequence) -> np.ndarray:
+    """(N, 6, 6) information with the markers of ``coverages`` added at the poses that see them."""
     out = info.copy()
     for cov in coverages:
         np.add.at(out, cov.pose_idx, cov.info)
@@ -266,7 +267,7 @@ def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = 
         else:
             order = np.asarray(uniform_placement(data.disc.perimeter_arclength, data.disc.perimeter_length, config.k, seed=config.seed))
         gains, q = np.full(len(order), np.nan), float("nan")
-        info_after = _apply(data.base_info, list(existing_covs) + [candidate_covs[i] for i in order])
+        info_after = apply_coverages(data.base_info, list(existing_covs) + [candidate_covs[i] for i in order])
     used = {m.tag_id for m in existing}
     markers, tag_id = [], config.first_tag_id
     for c in order:
@@ -277,8 +278,10 @@ def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = 
     return Placement(order.astype(np.int64), gains, markers, info_after, q)
 
 
-def first_pick_gain(data: PlanData, placement: Placement, existing_info: np.ndarray) -> np.ndarray:
-    """(N,) information gain of the first placed marker at every pose (0 where not seen)."""
+def first_pick_gain(data: PlanData, placement: Placement) -> np.ndarray:
+    """(N,) information gain of the first placed marker at every pose (0 where not seen),
+    given the existing markers (the paper's Fig. 5(c))."""
+    existing_info = apply_coverages(data.base_info, data.coverages[data.num_candidates:])
     gain = np.zeros(len(data.base_info))
     if len(placement.candidates):
         cov = data.coverages[int(placement.candidates[0])]
