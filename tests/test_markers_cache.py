@@ -27,6 +27,12 @@ def test_marker_file_round_trip(tmp_path):
     ('[{"size": 0.4, "position": [0,0,0], "normal": [1,0,0]}]', "tag_id"),
     ('[{"tag_id": 1, "size": 40, "position": [0,0,0], "normal": [1,0,0]}]', "out of range"),
     ('[{"tag_id": 1}]', "position"),
+    ('["x"]', "entry 0"),
+    ('[{"tag_id": "a", "size": 0.4, "position": [0,0,0], "normal": [1,0,0]}]', "malformed"),
+    ('[{"tag_id": 1, "size": "big", "position": [0,0,0], "normal": [1,0,0]}]', "malformed"),
+    ('[{"tag_id": 1, "size": 0.4, "position": [0,0], "normal": [1,0,0]}]', "3 numbers"),
+    ('[{"tag_id": 1, "size": 0.4, "position": [0,0,0], "normal": [0,0,0]}]', "malformed"),
+    ('[{"tag_id": 1, "world_from_marker": [[1,0],[0]]}]', "malformed"),
 ])
 def test_bad_marker_files(tmp_path, content, message):
     path = tmp_path / "m.json"

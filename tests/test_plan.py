@@ -66,13 +66,15 @@ def test_existing_markers_count_as_placed(tiny_plan, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["tiny", "-k", "2", "-v", "150"], "outside [0, 100]"),
     (["tiny", "-k", "0"], "at least 1"),
-    (["tiny", "-k", "500"], "larger than the"),
+    (["tiny", "-k", "500"], "only"),
+    (["tiny", "-k", "2", "--yaws", "0"], "--yaws"),
+    (["tiny", "-k", "2", "--grid-spacing", "0"], "--grid-spacing"),
     (["tiny", "-k", "2", "--start", "0.0,0.0"], "start"),
     (["tiny", "-k", "2", "--height", "4.0"], "no walls"),
     (["missing_file.glb", "-k", "2"], "no such file"),
 ])
 def test_plan_errors_are_one_line(args, message, tmp_path, capsys):
-    code = main(["plan", *args, "--out", str(tmp_path / "o"), *FAST])
+    code = main(["plan", args[0], "--out", str(tmp_path / "o"), *FAST, *args[1:]])  # case options win
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1 and err[0].startswith("markerplace: error:") and message in err[0], err

@@ -57,6 +57,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
+    if not config.methods and not args.placements:
+        raise UserError("--methods is empty: give a comma list such as none,omp,random,uniform (or --placements DIR)")
     plan_config = plan_config_from_args(args)
     plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.ks)))
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)

@@ -418,7 +418,8 @@ def find_placement_files(folder: str | Path) -> dict[str, Path]:
         raise UserError(f"--placements {folder} is not a directory")
     found: dict[str, Path] = {}
     for path in sorted(folder.rglob("*.json")):
-        if path.name.endswith(".meta.json") or path.name == "config.json":
+        # evaluate's own outputs and caches are not placements
+        if path.name.endswith(".meta.json") or path.name in ("config.json", "timings.json") or "cache" in path.relative_to(folder).parts:
             continue
         name = path.parent.name if path.name == "placement.json" else path.stem
         if name in METHODS:

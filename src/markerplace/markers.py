@@ -78,7 +78,10 @@ def marker_from_json(d: dict, default_size: float = DEFAULT_TAG_SIZE) -> Marker:
         if T.shape != (4, 4):
             raise UserError("marker 'world_from_marker' must be a 4x4 nested list")
     elif "position" in d and "normal" in d:
-        T = world_from_marker_pose(np.asarray(d["position"], float), np.asarray(d["normal"], float))
+        position, normal = np.asarray(d["position"], float), np.asarray(d["normal"], float)
+        if position.shape != (3,) or normal.shape != (3,):
+            raise UserError("marker 'position' and 'normal' must each be 3 numbers")
+        T = world_from_marker_pose(position, normal)
     else:
         raise UserError("marker entry needs 'world_from_marker' or both 'position' and 'normal'")
     return Marker(int(tag_id), size, T, family)
@@ -96,4 +99,16 @@ def load_markers(path: str | Path) -> list[Marker]:
     entries = data.get("markers") if isinstance(data, dict) else data
     if not isinstance(entries, list):
         raise UserError(f"marker file {path} must hold a list of markers or an object with a 'markers' list")
-    return [marker_from_json(e) for e in entries]
+    markers = []
+    for i, entry in enumerate(entries):
+        try:
+            if not isinstance(entry, dict):
+                raise UserError(f"entry {i} is not an object with tag_id, size, position/normal")
+            markers.append(marker_from_json(entry))
+        except UserError as err:
+            raise UserError(f"marker file {path}, entry {i}: {err}") from None
+        except (ValueError, TypeError) as err:
+            raise UserError(f"marker file {path}, entry {i}: malformed value ({err}); "
+                            "tag_id is an integer, size a number, position/normal 3 numbers, "
+                            "world_from_marker a 4x4 list") from None
+    return markers

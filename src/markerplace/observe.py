@@ -93,13 +93,18 @@ class Observations:
             return cls(**{k: f[k][()] for k in ("keypoints", "descriptors", "points_world", "pose_index", "offsets", "candidate_unoccluded")})
 
 
-def marker_sample_points(candidate_world_from_marker: np.ndarray, size: float) -> np.ndarray:
-    """(C, 5, 3) world points per candidate: tag centre and the 4 black-square corners."""
-    h = size / 2.0
-    local = np.array([[0, 0, 0], [-h, h, 0], [h, h, 0], [h, -h, 0], [-h, -h, 0]], dtype=float)
+def marker_sample_points(candidate_world_from_marker: np.ndarray, sizes) -> np.ndarray:
+    """(C, 5, 3) world points per candidate: tag centre and the 4 black-square corners.
+
+    ``sizes``: black-square edge in metres, one per candidate (C,) or one for all.
+    """
+    C = len(candidate_world_from_marker)
+    h = np.broadcast_to(np.asarray(sizes, dtype=float), (C,)) / 2.0
+    unit = np.array([[0, 0, 0], [-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]], dtype=float)
+    local = unit[None, :, :] * h[:, None, None]
     R = candidate_world_from_marker[:, :3, :3]
     t = candidate_world_from_marker[:, :3, 3]
-    return np.einsum("cij,kj->cki", R, local) + t[:, None, :]
+    return np.einsum("cij,ckj->cki", R, local) + t[:, None, :]
 
 
 def marker_occlusion_free(depth: np.ndarray, world_from_cam: np.ndarray, K: np.ndarray,
@@ -170,7 +175,7 @@ def _observe_one(args: tuple[int, np.ndarray, np.ndarray]):
 
 
 def observe(scene_spec: SceneSpec, world_from_cam: np.ndarray, candidate_in_view: np.ndarray,
-            candidate_world_from_marker: np.ndarray, tag_size: float, config: ObserveConfig,
+            candidate_world_from_marker: np.ndarray, tag_sizes, config: ObserveConfig,
             progress: bool = True) -> Observations:
     """Render and extract features at every pose.
 
@@ -180,7 +185,7 @@ def observe(scene_spec: SceneSpec, world_from_cam: np.ndarray, candidate_in_view
         candidate_in_view: (N, C) bool, candidates geometrically visible from each pose
             (range, FOV, viewing angle); only those are checked for occlusion.
         candidate_world_from_marker: (C, 4, 4) candidate marker poses.
-        tag_size: black-square edge in metres (for the corner samples).
+        tag_sizes: black-square edge in metres, (C,) or one for all (for the corner samples).
         config: observation settings.
         progress: show a progress bar.
     """
@@ -188,7 +193,7 @@ def observe(scene_spec: SceneSpec, world_from_cam: np.ndarray, candidate_in_view
 
     N = len(world_from_cam)
     C = len(candidate_world_from_marker)
-    samples = marker_sample_points(candidate_world_from_marker, tag_size) if C else np.zeros((0, 5, 3))
+    samples = marker_sample_points(candidate_world_from_marker, tag_sizes) if C else np.zeros((0, 5, 3))
     workers = default_workers(config.workers)
     jobs = [(i, world_from_cam[i], candidate_in_view[i] if C else np.zeros(0, bool)) for i in range(N)]
     results: list = [None] * N

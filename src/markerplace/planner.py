@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -114,6 +114,17 @@ def validate(config: PlanConfig) -> None:
         raise UserError(f"-v {p.v} is outside [0, 100]: give a percentage such as 90")
     if p.k < 1:
         raise UserError(f"-k {p.k} must be at least 1")
+    d = config.discretize
+    if d.num_yaws < 1:
+        raise UserError(f"--yaws {d.num_yaws} must be at least 1")
+    if d.grid_spacing <= 0.0:
+        raise UserError(f"--grid-spacing {d.grid_spacing} must be positive, e.g. 0.5 (metres)")
+    if d.clearance < 0.0:
+        raise UserError(f"--clearance {d.clearance} must not be negative")
+    if d.marker_spacing <= 0.0:
+        raise UserError(f"--marker-spacing {d.marker_spacing} must be positive, e.g. 1.0 (metres)")
+    if config.observe.workers < 0:
+        raise UserError(f"--workers {config.observe.workers} must be 0 (automatic) or more")
     if not 0.02 <= p.tag_size <= 3.0:
         raise UserError(f"--tag-size {p.tag_size} m is out of range: give the black-square edge in metres, e.g. 0.4")
 
@@ -182,14 +193,15 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     in_view = geometric_visibility(disc.world_from_cam, all_T, config)
 
     t0 = time.perf_counter()
-    obs_key = cache.hash_of("observe-v1", disc_key, config.observe, all_T, sizes)
+    # the worker count changes speed, not results: keep it out of the key
+    obs_key = cache.hash_of("observe-v1", disc_key, replace(config.observe, workers=0), all_T, sizes)
     obs_path = run_dir / "observations.h5"
     if cache.is_fresh(obs_path, obs_key):
         obs = Observations.load(obs_path)
         log.info("observe: reusing %s", obs_path)
     else:
         log.info("observe: rendering and extracting SIFT at %d poses", N)
-        obs = observe(scene_spec, disc.world_from_cam, in_view, all_T, float(max(sizes)), config.observe, progress=progress)
+        obs = observe(scene_spec, disc.world_from_cam, in_view, all_T, np.asarray(sizes, float), config.observe, progress=progress)
         obs.save(obs_path)
         cache.mark_done(obs_path, obs_key)
     timings["observe"] = time.perf_counter() - t0
@@ -254,7 +266,7 @@ def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = 
     """Choose ``config.k`` markers among the candidates with the configured method."""
     C = data.num_candidates
     if config.k > C:
-        raise UserError(f"-k {config.k} is larger than the {C} candidate marker poses found: lower -k or reduce --marker-spacing")
+        raise UserError(f"{config.k} markers requested but only {C} candidate marker poses were found: ask for fewer markers or reduce --marker-spacing")
     existing_covs = data.coverages[C:]
     candidate_covs = data.coverages[:C]
     if config.method == "omp":
