@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The README's demo (run by `make demo` after set-up): look at a built-in scene, plan markers
-# with OMP, and prove on a short simulation that they help. About 10 minutes on 2 cores.
+# with OMP, and prove on a short simulation that they help. About 5 minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MP=.venv/bin/markerplace
