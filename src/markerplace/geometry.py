@@ -156,6 +156,35 @@ def project(K: np.ndarray, world_from_cam: np.ndarray, points_world: np.ndarray)
     return uv, z
 
 
+def project_with_depth_lookup(depth: np.ndarray, world_from_cam: np.ndarray, K: np.ndarray,
+                              points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points and read the rendered depth under each one.
+
+    Args:
+        depth: (H, W) planar depth image in metres (0 where nothing was hit).
+        world_from_cam: (4, 4) pose of that image.
+        K: (3, 3) intrinsics.
+        points_world: (N, 3) world points.
+
+    Returns:
+        uv (N, 2) pixel coordinates (meaningless where z <= 1e-3), z (N,) planar depth of the
+        points, surface (N,) rendered depth at the nearest pixel (0 behind the camera or
+        outside the image).
+    """
+    H, W = depth.shape
+    cam_from_world = invert(world_from_cam)
+    p = np.asarray(points_world, dtype=float) @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
+    z = p[:, 2]
+    front = z > 1e-3
+    zs = np.where(front, z, 1.0)
+    uv = np.stack([K[0, 0] * p[:, 0] / zs + K[0, 2], K[1, 1] * p[:, 1] / zs + K[1, 2]], axis=1)
+    ui, vi = np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int)
+    inside = front & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+    surface = np.zeros_like(z)
+    surface[inside] = depth[vi[inside], ui[inside]]
+    return uv, z, surface
+
+
 def backproject(K: np.ndarray, world_from_cam: np.ndarray, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
     """(N, 2) pixels with (N,) planar depth in metres -> (N, 3) world points."""
     x = (uv[:, 0] - K[0, 2]) / K[0, 0] * depth

@@ -21,7 +21,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .geometry import Intrinsics, invert
+from .geometry import Intrinsics, project_with_depth_lookup
 from .io_utils import atomic_path
 from .localization.features import SIFT_SCORING, SiftConfig, extract_sift, lift_to_3d
 from .workers import default_workers, single_threaded_libraries, spawn_pool
@@ -123,19 +123,11 @@ def marker_occlusion_free(depth: np.ndarray, world_from_cam: np.ndarray, K: np.n
         and the rendered surface there is not closer than the sample (minus ``tolerance``).
     """
     H, W = depth.shape
-    cam_from_world = invert(world_from_cam)
     C, S, _ = samples_world.shape
-    p = samples_world.reshape(-1, 3) @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
-    z = p[:, 2]
-    safe_z = np.where(z > 1e-6, z, 1.0)
-    u = K[0, 0] * p[:, 0] / safe_z + K[0, 2]
-    v = K[1, 1] * p[:, 1] / safe_z + K[1, 2]
-    ui = np.round(u).astype(int)
-    vi = np.round(v).astype(int)
-    inside = (z > 1e-6) & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
-    d = np.zeros_like(z)
-    d[inside] = depth[vi[inside], ui[inside]]
-    ok = inside & ((d == 0) | (d >= z - tolerance))
+    uv, z, surface = project_with_depth_lookup(depth, world_from_cam, K, samples_world.reshape(-1, 3))
+    ui, vi = np.round(uv[:, 0]), np.round(uv[:, 1])
+    inside = (z > 1e-3) & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+    ok = inside & ((surface == 0) | (surface >= z - tolerance))
     return ok.reshape(C, S).all(axis=1)
 
 

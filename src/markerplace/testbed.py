@@ -30,7 +30,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from .geometry import Intrinsics, invert
+from .geometry import Intrinsics, project_with_depth_lookup
 from .io_utils import atomic_path, write_npy
 from .localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
 from .markers import Marker
@@ -189,19 +189,10 @@ def markers_in_view(depth: np.ndarray, world_from_cam: np.ndarray, K: np.ndarray
     if M == 0:
         return np.zeros(0, bool)
     H, W = depth.shape
-    cam_from_world = invert(world_from_cam)
-    p = samples.reshape(-1, 3) @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
-    z = p[:, 2]
-    front = z > 1e-3
-    zs = np.where(front, z, 1.0)
-    u = K[0, 0] * p[:, 0] / zs + K[0, 2]
-    v = K[1, 1] * p[:, 1] / zs + K[1, 2]
-    near_image = front & (u > -0.5 - margin_px) & (u < W - 0.5 + margin_px) & (v > -0.5 - margin_px) & (v < H - 0.5 + margin_px)
-    ui, vi = np.round(u).astype(int), np.round(v).astype(int)
-    inside = near_image & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
-    d = np.zeros_like(z)
-    d[inside] = depth[vi[inside], ui[inside]]
-    hidden = inside & (d > 0) & (d < z - tolerance)
+    uv, z, surface = project_with_depth_lookup(depth, world_from_cam, K, samples.reshape(-1, 3))
+    u, v = uv[:, 0], uv[:, 1]
+    near_image = (z > 1e-3) & (u > -0.5 - margin_px) & (u < W - 0.5 + margin_px) & (v > -0.5 - margin_px) & (v < H - 0.5 + margin_px)
+    hidden = near_image & (surface > 0) & (surface < z - tolerance)
     return (near_image & ~hidden).reshape(M, S).any(axis=1)
 
 
