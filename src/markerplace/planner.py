@@ -263,14 +263,21 @@ def apply_coverages(info: np.ndarray, coverages: Sequence) -> np.ndarray:
 
 
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
-    """Choose ``config.k`` markers among the candidates with the configured method."""
+    """Choose ``config.k`` markers among the candidates with the configured method.
+
+    With ``progress``, each OMP pick is logged (candidate, gain) as it is made.
+    """
     C = data.num_candidates
     if config.k > C:
         raise UserError(f"{config.k} markers requested but only {C} candidate marker poses were found: ask for fewer markers or reduce --marker-spacing")
     existing_covs = data.coverages[C:]
     candidate_covs = data.coverages[:C]
     if config.method == "omp":
-        res = omp_greedy(data.base_info, candidate_covs, config.k, v=config.v, lazy=config.lazy, existing=existing_covs)
+        def report(i: int, k: int, candidate: int, gain: float) -> None:
+            log.info("omp pick %d/%d: candidate %d, gain %.3f", i + 1, k, candidate, gain)
+
+        res = omp_greedy(data.base_info, candidate_covs, config.k, v=config.v, lazy=config.lazy,
+                         existing=existing_covs, progress=report if progress else None)
         order, gains, q = np.asarray(res.order), np.asarray(res.gains, dtype=float), float(res.q)
         info_after = res.info_after
     else:
