@@ -1,7 +1,7 @@
 """Camera localizability: information matrices, entropy, marker models, marker visibility.
 
 This module implements the closed form of DESIGN.md section 5 (the paper's factor graphs
-marginalized analytically), batched over all camera poses with numpy.
+marginalized analytically), batched over all camera poses.
 
 Conventions
 -----------
@@ -22,9 +22,10 @@ pinhole projection ``pi``::
     Lambda = prior_sigma^-2 I + sum_landmarks J^T S^-1 J (+ sum_markers M)
 
 Because ``Sigma_p`` is isotropic, ``P Sigma_p P^T = s D D^T`` with ``D = dpi/dp_c``; ``J`` is the
-classic interaction matrix. Each landmark's term is whitened (``A = L^-1 J`` with ``S = L L^T``)
-and per-pose sums ``sum A^T A`` are batched matrix products over a padded (pose, landmark)
-layout, so there is no Python loop over poses or landmarks.
+classic interaction matrix. Each landmark's term is whitened (``A = L^-1 J`` with ``S = L L^T``).
+The per-pose sums ``sum A^T A`` over natural landmarks run in a compiled kernel
+(:mod:`markerplace.landmark_kernel`, one pass per pose, poses spread over threads); the few
+marker terms use the same whitening in numpy (:func:`_whitened_jacobians`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import invert, marker_corners_local
+from .landmark_kernel import landmark_information_sums
 
 log = logging.getLogger(__name__)
 
@@ -79,10 +81,6 @@ class NoiseConfig:
 # --------------------------------------------------------------------------------------------
 # Natural-feature information
 # --------------------------------------------------------------------------------------------
-
-#: Target number of (padded) landmark slots processed per chunk; keeps temporaries in cache.
-_CHUNK_SLOTS = 1 << 14
-
 
 def _whitened_jacobians(x: np.ndarray, y: np.ndarray, z: np.ndarray, var_p: np.ndarray | float,
                         valid: np.ndarray, K: np.ndarray, pixel_sigma: float) -> np.ndarray:
@@ -202,58 +200,17 @@ def pose_information(world_from_cam: np.ndarray, K: np.ndarray, points_world: np
             order = np.argsort(idx, kind="stable")
             idx, pts = idx[order], pts[order]
             nsim = None if nsim is None else nsim[order]
-        counts = np.bincount(idx, minlength=N)
         starts = np.zeros(N + 1, dtype=np.int64)
-        np.cumsum(counts, out=starts[1:])
-        R = T[:, :3, :3]
+        np.cumsum(np.bincount(idx, minlength=N), out=starts[1:])
+        R = np.ascontiguousarray(T[:, :3, :3])
         # Camera-frame offset: p_c = R^T p + c with c = -R^T t.
-        c_off = -np.einsum("nji,nj->ni", R, T[:, :3, 3])
-        max_r2 = noise.max_range**2
-        var0 = noise.landmark_sigma**2
-
-        n0 = 0
-        while n0 < N:
-            # Grow the chunk of poses [n0, n1) while the padded size stays under the target.
-            n1, mmax = n0, 0
-            while n1 < N:
-                mm = max(mmax, int(counts[n1]))
-                if n1 > n0 and mm * (n1 + 1 - n0) > _CHUNK_SLOTS:
-                    break
-                mmax, n1 = mm, n1 + 1
-            a0, a1 = starts[n0], starts[n1]
-            nb = n1 - n0
-            if mmax == 0:
-                n0 = n1
-                continue
-            if a1 - a0 == nb * mmax:  # dense: every pose has mmax landmarks
-                Xp = pts[a0:a1].reshape(nb, mmax, 3).transpose(2, 0, 1)
-                filled = np.ones((nb, mmax), dtype=bool)
-                var = np.full((nb, mmax), var0) if nsim is None else \
-                    var0 * (1.0 + nsim[a0:a1].reshape(nb, mmax))
-            else:
-                flat = (idx[a0:a1] - n0) * mmax + (np.arange(a0, a1) - starts[idx[a0:a1]])
-                Xp = np.zeros((3, nb * mmax))
-                Xp[:, flat] = pts[a0:a1].T
-                Xp = Xp.reshape(3, nb, mmax)
-                filled = np.zeros(nb * mmax, dtype=bool)
-                filled[flat] = True
-                filled = filled.reshape(nb, mmax)
-                var = np.full(nb * mmax, var0)
-                if nsim is not None:
-                    var[flat] *= 1.0 + nsim[a0:a1]
-                var = var.reshape(nb, mmax)
-            Rb, cb = R[n0:n1], c_off[n0:n1]
-            pc = []
-            for i in range(3):
-                q = Xp[0] * Rb[:, 0, i, None]
-                q += Xp[1] * Rb[:, 1, i, None]
-                q += Xp[2] * Rb[:, 2, i, None]
-                q += cb[:, i, None]
-                pc.append(q)
-            x, y, z = pc
-            valid = filled & (z > 1e-6) & ((x * x + y * y + z * z) <= max_r2)
-            Lam[n0:n1] = _gram(_whitened_jacobians(x, y, z, var, valid, K, noise.pixel_sigma))
-            n0 = n1
+        c_off = np.ascontiguousarray(-np.einsum("nji,nj->ni", R, T[:, :3, 3]))
+        var = np.full(P, noise.landmark_sigma**2)
+        if nsim is not None:
+            var *= 1.0 + nsim
+        landmark_information_sums(R, c_off, np.ascontiguousarray(pts), starts, var,
+                                  float(K[0, 0]), float(K[1, 1]), float(noise.pixel_sigma)**2,
+                                  float(noise.max_range)**2, Lam)
     Lam[:, np.arange(6), np.arange(6)] += 1.0 / noise.prior_sigma**2
     return Lam
 
