@@ -168,7 +168,9 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
             loose = next(x for x in rows if x["threshold"] == "1m/30deg" and
                          (x["method"], x["k"], x["test_set"]) == (r["method"], r["k"], r["test_set"]))
             assert float(loose["recall"]) >= float(r["recall"])
-    assert "| tiny (" in (out / "tables.md").read_text()
+    tables = (out / "tables.md").read_text()
+    assert "| tiny (" in tables
+    assert "## Paired differences at 5cm/5deg" in tables and "| Ours | Rand. (1 run) |" in tables
     errs = np.load(out / "query_errors.npz")
     assert errs["weighted_t_err"].shape == (4, 20) and errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform"]
     # same test poses for every method: one file per test set, identical on a re-run

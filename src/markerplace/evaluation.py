@@ -228,20 +228,26 @@ def pose_errors_batch(est_world_from_cam: np.ndarray, true_world_from_cam: np.nd
     return t_err, r_err
 
 
-def recall(t_err: np.ndarray, r_err: np.ndarray, t_max: float, r_max: float) -> float:
-    """Fraction in [0, 1] of queries with ``t_err <= t_max`` AND ``r_err <= r_max`` (inclusive).
+def hit_mask(t_err: np.ndarray, r_err: np.ndarray, t_max: float, r_max: float) -> np.ndarray:
+    """(n,) bool: queries with ``t_err <= t_max`` (metres) AND ``r_err <= r_max`` (degrees).
 
-    Failures (``inf`` or NaN errors) count as misses. Empty input gives NaN.
+    Failures (``inf`` or NaN errors) are misses.
     """
     t_err = np.asarray(t_err, dtype=float)
     r_err = np.asarray(r_err, dtype=float)
     if t_err.shape != r_err.shape:
         raise ValueError("t_err and r_err must have the same shape")
-    if t_err.size == 0:
-        return float("nan")
     with np.errstate(invalid="ignore"):
-        hit = (t_err <= t_max) & (r_err <= r_max)  # NaN compares False -> miss
-    return float(hit.mean())
+        return (t_err <= t_max) & (r_err <= r_max)  # NaN compares False -> miss
+
+
+def recall(t_err: np.ndarray, r_err: np.ndarray, t_max: float, r_max: float) -> float:
+    """Fraction in [0, 1] of queries with ``t_err <= t_max`` AND ``r_err <= r_max`` (inclusive).
+
+    Failures (``inf`` or NaN errors) count as misses. Empty input gives NaN.
+    """
+    hit = hit_mask(t_err, r_err, t_max, r_max)
+    return float(hit.mean()) if hit.size else float("nan")
 
 
 def recalls(t_err: np.ndarray, r_err: np.ndarray,

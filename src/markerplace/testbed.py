@@ -645,6 +645,7 @@ def write_outputs(out: Path, scene_name: str, placements, results: dict, test_po
     from .cache import config_dict
     from .io_utils import write_json, write_npz
     from .report.figures import recall_vs_k
+    from .report.paired import paired_markdown
     from .report.tables import recall_curves, tables_markdown, write_recall_csv
 
     labels = [ev.threshold_label(t) for t in config.thresholds]
@@ -669,6 +670,10 @@ def write_outputs(out: Path, scene_name: str, placements, results: dict, test_po
     main = ev.threshold_label(ev.MAIN_THRESHOLD) if ev.MAIN_THRESHOLD in config.thresholds else labels[0]
     ks = sorted(set(config.ks))
     md = tables_markdown(rows, ks, main, labels)
+    t_main, r_main = next(t for t in config.thresholds if ev.threshold_label(t) == main)
+    hits = {ts: {(m, run, k): ev.hit_mask(*res, t_main, r_main)
+                 for (m, run, k, t), res in results.items() if t == ts} for ts in config.test_sets}
+    md += paired_markdown(hits, ks, main, seed=config.seed)
     with atomic_path(out / "tables.md") as tmp:
         tmp.write_text(md)
     ts0 = config.test_sets[0]
