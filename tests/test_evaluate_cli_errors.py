@@ -15,3 +15,15 @@ def test_evaluate_bad_settings(args, message, tmp_path, capsys):
     assert main(["evaluate", "tiny", "--out", str(tmp_path / "e"), "--quiet", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("markerplace: error:") and message in err[0], err
+
+
+def test_test_seed_defaults_to_seed_and_overrides_it():
+    import argparse
+
+    from markerplace.evaluate_cli import add_evaluate_parser, evaluate_config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_evaluate_parser(parser.add_subparsers(dest="command"))
+    base = ["evaluate", "tiny", "--out", "x", "--seed", "7"]
+    assert evaluate_config_from_args(parser.parse_args(base)).seed == 7
+    assert evaluate_config_from_args(parser.parse_args(base + ["--test-seed", "3"])).seed == 3

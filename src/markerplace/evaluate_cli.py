@@ -42,7 +42,7 @@ def evaluate_config_from_args(args: argparse.Namespace):
         tag_corners=args.tag_corners,
         tag_scale=args.tag_scale,
         shift=args.shift,
-        seed=args.seed,
+        seed=args.seed if args.test_seed is None else args.test_seed,
     )
 
 
@@ -80,7 +80,7 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
         help="simulation testbed: place markers with each method, render, localize test images, report recall",
         description="Compare marker placements in simulation (the paper's experiments): OMP vs no markers, random "
                     "and uniform placements; recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), (1 m, 30 deg). "
-                    "--seed also seeds the test poses.",
+                    "--seed also seeds the test poses unless --test-seed is given.",
     )
     _add_scene_args(p)
     p.add_argument("--out", required=True, help="run directory (outputs, caches; an interrupted run resumes)")
@@ -91,6 +91,9 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                    help="comma list of none, omp, random, uniform (default all)")
     p.add_argument("--runs", type=int, default=5, help="placements per random/uniform baseline (default 5)")
     p.add_argument("--k", default="5,10,15,20", help="comma list of marker budgets (default 5,10,15,20)")
+    p.add_argument("--test-seed", type=int, default=None,
+                   help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new test "
+                        "set without changing a built-in scene")
     p.add_argument("--placements", default=None,
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
     g = p.add_argument_group("study switches")
