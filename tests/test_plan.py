@@ -34,6 +34,8 @@ def test_plan_writes_every_output(tiny_plan):
     assert plan["markers"][0]["gain"] >= plan["markers"][1]["gain"]  # greedy gains never increase
     rows = list(csv.DictReader((tiny_plan / "placement.csv").open()))
     assert [int(r["tag_id"]) for r in rows] == [mk["tag_id"] for mk in plan["markers"]]
+    sheets = sorted(p.name for p in (tiny_plan / "tags").glob("*.svg"))
+    assert sheets == [f"{mk['order']:02d}_tag{mk['tag_id']}.svg" for mk in plan["markers"]]
     scores = np.load(tiny_plan / "scores.npz")
     assert scores["score_after"].shape == scores["score_before"].shape
     assert np.all(scores["score_after"] >= scores["score_before"] - 1e-9)

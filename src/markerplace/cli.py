@@ -128,7 +128,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
     log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in data.timings.items()))
-    print(f"wrote {args.out}/placement.json, placement.csv, scores.npz, scores.png, gain_first.png, placement.png, config.json")
+    print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     return 0
 
 

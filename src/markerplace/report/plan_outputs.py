@@ -1,4 +1,4 @@
-"""Files a plan run leaves for its user: placement.json/.csv, scores.npz, figures, config.json."""
+"""Files a plan run leaves for its user: placement.json/.csv, tags/*.svg, scores.npz, figures, config.json."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from ..cache import config_dict
 from ..io_utils import atomic_path, write_json, write_npz
 from ..localizability import entropy
 from .figures import floor_map, per_location_mean
+from .printable import write_tag_sheets
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,8 @@ def placement_records(placement, method: str) -> list[dict]:
 
 
 def write_placement(out_dir: Path, placement, method: str, scene_source: str, extra: dict) -> None:
-    """placement.json (markers + summary) and placement.csv (one row per marker)."""
+    """placement.json (markers + summary), placement.csv (one row per marker) and tags/ (one
+    print-ready SVG per marker)."""
     records = placement_records(placement, method)
     write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": records})
     buf = io.StringIO()
@@ -53,6 +55,7 @@ def write_placement(out_dir: Path, placement, method: str, scene_source: str, ex
                          "" if r["gain"] is None else f"{r['gain']:.6g}"])
     with atomic_path(out_dir / "placement.csv") as tmp:
         tmp.write_text(buf.getvalue())
+    write_tag_sheets(out_dir / "tags", records)
 
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,

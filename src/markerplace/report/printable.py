@@ -1,0 +1,97 @@
+"""Print-ready tag sheets: one SVG per placed marker, at its exact physical size.
+
+Each file is a vector drawing (millimetre units, so any printer or print shop reproduces the
+size exactly) of the tag36h11 pattern with its white quiet zone (:func:`markerplace.render.tags.
+outer_size`), and below it a caption strip: placement order, tag id, black-square size,
+position and facing direction. The caption is outside the quiet zone, so it never touches the
+pattern, and it marks the tag's bottom edge: hang the sheet caption-side down.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+from xml.sax.saxutils import escape
+
+import numpy as np
+
+from ..io_utils import atomic_path
+from ..render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
+
+
+def tag_modules(tag_id: int) -> np.ndarray:
+    """(B, B) bool, True = black, of the tag with its quiet zone; B = TAG_BITS + 2 QUIET_BITS.
+
+    Row 0 is the tag's top edge.
+    """
+    return tag_image(tag_id, pixels_per_bit=1) < 128
+
+
+def tag_svg(tag_id: int, size_m: float, caption: str) -> str:
+    """SVG document of one tag at physical size.
+
+    Args:
+        tag_id: tag36h11 id.
+        size_m: black-square edge, metres.
+        caption: text printed under the quiet zone (one line).
+
+    Returns:
+        SVG text; width = outer edge and height = outer edge + caption strip, in mm. Black
+        modules are drawn as horizontal runs of rectangles on a white background.
+    """
+    modules = tag_modules(tag_id)
+    bits = TAG_BITS + 2 * QUIET_BITS
+    edge_mm = outer_size(size_m) * 1000.0
+    cell = edge_mm / bits
+    strip = max(8.0, 0.06 * edge_mm)
+    font = 0.45 * strip
+    rects = []
+    for r in range(bits):
+        c = 0
+        while c < bits:
+            if modules[r, c]:
+                c1 = c
+                while c1 < bits and modules[r, c1]:
+                    c1 += 1
+                rects.append(f'<rect x="{c * cell:.4f}" y="{r * cell:.4f}" width="{(c1 - c) * cell:.4f}" '
+                             f'height="{cell:.4f}"/>')
+                c = c1
+            else:
+                c += 1
+    height = edge_mm + strip
+    return "\n".join([
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{edge_mm:.3f}mm" height="{height:.3f}mm" '
+        f'viewBox="0 0 {edge_mm:.4f} {height:.4f}">',
+        f'<rect x="0" y="0" width="{edge_mm:.4f}" height="{height:.4f}" fill="white"/>',
+        '<g fill="black" shape-rendering="crispEdges">', *rects, "</g>",
+        f'<text x="{edge_mm / 2:.4f}" y="{edge_mm + 0.7 * strip:.4f}" font-family="sans-serif" '
+        f'font-size="{font:.3f}" text-anchor="middle" fill="black">{escape(caption)}</text>',
+        "</svg>", ""])
+
+
+def caption_for(record: dict) -> str:
+    """One-line caption of a ``placement.json`` marker record."""
+    x, y, z = record["position"]
+    return (f"#{record['order']}  {record['family']} id {record['tag_id']}  "
+            f"black square {1000 * record['size']:.0f} mm  centre ({x:.2f}, {y:.2f}, {z:.2f}) m  "
+            f"facing {record['yaw_deg']:.0f} deg  (this side down)")
+
+
+def write_tag_sheets(folder: str | Path, records: Sequence[dict]) -> list[Path]:
+    """Write ``NN_tag<id>.svg`` for each marker record (see :func:`caption_for`), atomically;
+    SVGs of an earlier plan in ``folder`` that are not part of this one are removed.
+
+    Returns the written paths in placement order.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for rec in records:
+        path = folder / f"{rec['order']:02d}_tag{rec['tag_id']}.svg"
+        with atomic_path(path) as tmp:
+            tmp.write_text(tag_svg(rec["tag_id"], rec["size"], caption_for(rec)))
+        paths.append(path)
+    for old in set(folder.glob("*.svg")) - set(paths):
+        old.unlink()
+    return paths

@@ -1,0 +1,61 @@
+"""Print-ready tag SVGs: exact physical size, the right pattern (detected back), captions."""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from markerplace.render.tags import outer_size
+from markerplace.report.printable import caption_for, tag_modules, tag_svg, write_tag_sheets
+
+NS = "{http://www.w3.org/2000/svg}"
+
+
+def rasterize(svg: str, px_per_mm: float) -> np.ndarray:
+    """Draw the SVG's black rectangles (the tag part only) into a uint8 image."""
+    root = ET.fromstring(svg)
+    w = float(root.get("width").removesuffix("mm"))
+    img = np.full((int(round(w * px_per_mm)),) * 2, 255, np.uint8)
+    for g in root.iter(f"{NS}g"):
+        for r in g.iter(f"{NS}rect"):
+            x0, y0 = float(r.get("x")) * px_per_mm, float(r.get("y")) * px_per_mm
+            x1 = x0 + float(r.get("width")) * px_per_mm
+            y1 = y0 + float(r.get("height")) * px_per_mm
+            img[int(round(y0)):int(round(y1)), int(round(x0)):int(round(x1))] = 0
+    return img
+
+
+@pytest.mark.parametrize("tag_id, size", [(0, 0.4), (17, 0.15), (586, 0.41)])
+def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
+    from pupil_apriltags import Detector
+
+    svg = tag_svg(tag_id, size, "caption & <text>")
+    root = ET.fromstring(svg)  # well-formed, caption escaped
+    width = float(root.get("width").removesuffix("mm"))
+    height = float(root.get("height").removesuffix("mm"))
+    assert width == pytest.approx(1000 * outer_size(size), abs=1e-3)
+    assert height > width
+    assert "caption &amp; &lt;text&gt;" in svg
+    img = rasterize(svg, px_per_mm=240 / width)
+    # the drawn modules are the tag's: compare with the reference bits, module by module
+    bits = tag_modules(tag_id).shape[0]
+    cell = img.shape[0] / bits
+    centres = ((np.arange(bits) + 0.5) * cell).astype(int)
+    assert np.array_equal(img[np.ix_(centres, centres)] == 0, tag_modules(tag_id))
+    dets = Detector(families="tag36h11").detect(np.pad(img, 20, constant_values=255))
+    assert [d.tag_id for d in dets] == [tag_id]
+
+
+def test_write_tag_sheets_names_captions_and_cleanup(tmp_path) -> None:
+    rec = dict(order=3, tag_id=17, family="tag36h11", size=0.4, position=[1.0, 2.5, 1.5], yaw_deg=90.0)
+    cap = caption_for(rec)
+    assert cap.startswith("#3  tag36h11 id 17  black square 400 mm  centre (1.00, 2.50, 1.50) m  facing 90 deg")
+    (tmp_path / "tags").mkdir()
+    (tmp_path / "tags" / "01_tag5.svg").write_text("stale")
+    paths = write_tag_sheets(tmp_path / "tags", [rec, {**rec, "order": 4, "tag_id": 18}])
+    assert [p.name for p in paths] == ["03_tag17.svg", "04_tag18.svg"]
+    assert sorted(p.name for p in (tmp_path / "tags").iterdir()) == ["03_tag17.svg", "04_tag18.svg"]
+    assert re.search(r"#4  tag36h11 id 18", paths[1].read_text())
