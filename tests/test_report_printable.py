@@ -39,6 +39,9 @@ def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
     assert width == pytest.approx(1000 * outer_size(size), abs=1e-3)
     assert height > width
     assert "caption &amp; &lt;text&gt;" in svg
+    long_caption = tag_svg(tag_id, size, "x" * 120)
+    font = float(re.search(r'font-size="([0-9.]+)"', long_caption).group(1))
+    assert 120 * 0.55 * font <= width  # the caption fits the sheet's width
     img = rasterize(svg, px_per_mm=240 / width)
     # the drawn modules are the tag's: compare with the reference bits, module by module
     bits = tag_modules(tag_id).shape[0]

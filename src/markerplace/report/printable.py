@@ -44,7 +44,8 @@ def tag_svg(tag_id: int, size_m: float, caption: str) -> str:
     edge_mm = outer_size(size_m) * 1000.0
     cell = edge_mm / bits
     strip = max(8.0, 0.06 * edge_mm)
-    font = 0.45 * strip
+    # about 0.55 em per glyph: keep the caption inside the sheet's width
+    font = min(0.45 * strip, 0.95 * edge_mm / (0.55 * max(len(caption), 1)))
     rects = []
     for r in range(bits):
         c = 0
