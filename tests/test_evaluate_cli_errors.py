@@ -24,6 +24,11 @@ def test_test_seed_defaults_to_seed_and_overrides_it():
 
     parser = argparse.ArgumentParser()
     add_evaluate_parser(parser.add_subparsers(dest="command"))
+    from markerplace.testbed import _localizer_config
+
     base = ["evaluate", "tiny", "--out", "x", "--seed", "7"]
-    assert evaluate_config_from_args(parser.parse_args(base)).seed == 7
-    assert evaluate_config_from_args(parser.parse_args(base + ["--test-seed", "3"])).seed == 3
+    assert evaluate_config_from_args(parser.parse_args(base)).pose_seed == 7
+    config = evaluate_config_from_args(parser.parse_args(base + ["--test-seed", "3"]))
+    assert config.pose_seed == 3
+    # the localizer (RANSAC) and the VLAD codebook keep --seed
+    assert config.seed == 7 and _localizer_config(config).seed == 7

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from markerplace.report.paired import (
-    bootstrap_mean_ci,
+    bootstrap_difference,
     format_difference,
     paired_differences,
     paired_markdown,
@@ -14,18 +14,30 @@ from markerplace.report.paired import (
 )
 
 
-def test_bootstrap_interval_contains_mean_and_is_seeded() -> None:
+def test_bootstrap_interval_covers_images_and_runs() -> None:
     rng = np.random.default_rng(0)
-    diff = rng.choice([-1.0, 0.0, 1.0], size=400, p=[0.1, 0.7, 0.2])
-    mean, low, high = bootstrap_mean_ci(diff, n_boot=1000, seed=3)
-    assert mean == pytest.approx(diff.mean())
-    assert low < mean < high
-    # the interval is about +-1.96 standard errors
-    se = diff.std(ddof=1) / np.sqrt(diff.size)
+    n = 400
+    own = (rng.random(n) < 0.8).astype(float)
+    one_run = (rng.random((1, n)) < 0.7).astype(float)
+    diff, low, high = bootstrap_difference(own, one_run, n_boot=1000, seed=3)
+    assert diff == pytest.approx(own.mean() - one_run.mean())
+    assert low < diff < high
+    # one run: the interval is about +-1.96 standard errors of the per-image differences
+    se = (own - one_run[0]).std(ddof=1) / np.sqrt(n)
     assert high - low == pytest.approx(2 * 1.96 * se, rel=0.15)
-    assert bootstrap_mean_ci(diff, n_boot=1000, seed=3) == (mean, low, high)
-    assert bootstrap_mean_ci(np.full(50, 0.25), n_boot=100) == (0.25, 0.25, 0.25)
-    assert all(np.isnan(bootstrap_mean_ci(np.zeros(0))))
+    assert bootstrap_difference(own, one_run, n_boot=1000, seed=3) == (diff, low, high)
+    # runs that disagree widen the interval (resampling runs); identical runs do not
+    spread = np.stack([(rng.random(n) < p).astype(float) for p in (0.5, 0.6, 0.7, 0.8, 0.9)])
+    same = np.repeat(spread[2:3], 5, axis=0)
+    w_spread = np.subtract(*bootstrap_difference(own, spread, 1000, 3)[2:0:-1])
+    w_same = np.subtract(*bootstrap_difference(own, same, 1000, 3)[2:0:-1])
+    assert w_spread > 1.5 * w_same
+    assert bootstrap_difference(np.full(50, 1.0), np.full((2, 50), 0.75), n_boot=100) == (0.25, 0.25, 0.25)
+    assert all(np.isnan(bootstrap_difference(np.zeros(0), np.zeros((1, 0)))))
+    with pytest.raises(ValueError):
+        bootstrap_difference(own, one_run, n_boot=0)
+    with pytest.raises(ValueError):
+        bootstrap_difference(own, one_run[:, :10])
 
 
 def test_paired_difference_is_recall_difference() -> None:
@@ -43,7 +55,7 @@ def test_paired_difference_is_recall_difference() -> None:
     assert rnd["diff"] == pytest.approx(expected) and rnd["runs"] == 3
     assert rnd["low"] > 0  # a 20-point lead on 300 images is clear
     same = diffs[("omp", "uniform")]
-    assert (same["diff"], same["low"], same["high"]) == (0.0, 0.0, 0.0)
+    assert np.allclose((same["diff"], same["low"], same["high"]), 0.0, atol=1e-12)
     # a k with no candidate result gives no row
     assert paired_differences(hits, [5]) == []
 
@@ -53,6 +65,7 @@ def test_paired_table_and_markdown() -> None:
     d_zero = dict(method="omp", baseline="random", k=20, diff=0.01, low=-0.02, high=0.04, runs=5)
     assert format_difference(d_pos) == "**+5.0 [+1.0, +9.0]**"
     assert format_difference(d_zero) == "+1.0 [-2.0, +4.0]"
+    assert format_difference({**d_zero, "diff": -0.05, "low": -0.08, "high": -0.01}) == "*-5.0 [-8.0, -1.0]*"
     table = paired_table([d_pos, d_zero], [5, 10, 20])
     assert "| Ours | Rand. (5 runs) | - | **+5.0 [+1.0, +9.0]** | +1.0 [-2.0, +4.0] |" in table
     hits = {("omp", 0, 5): np.ones(10, bool), ("random", 0, 5): np.zeros(10, bool)}

@@ -42,7 +42,8 @@ def evaluate_config_from_args(args: argparse.Namespace):
         tag_corners=args.tag_corners,
         tag_scale=args.tag_scale,
         shift=args.shift,
-        seed=args.seed if args.test_seed is None else args.test_seed,
+        seed=args.seed,
+        test_seed=args.test_seed,
     )
 
 

@@ -266,6 +266,8 @@ def threshold_label(threshold: tuple[float, float]) -> str:
 # --- experiments -------------------------------------------------------------------------------
 
 METHODS = ("none", "omp", "random", "uniform")
+#: Randomized baselines: several seeded runs each (``--runs``).
+BASELINE_METHODS = ("random", "uniform")
 
 
 @dataclass(frozen=True)
@@ -285,7 +287,9 @@ class EvaluateConfig:
             marker model still uses the nominal size).
         shift: markers are moved along their wall by +-shift metres, alternating sign with a
             seeded first sign (sensitivity study).
-        seed: seed of the test poses and of the shift signs.
+        seed: seed of the localizer's RANSAC, of the VLAD codebook's k-means and, unless
+            ``test_seed`` is set, of the test poses and the shift signs.
+        test_seed: seed of the test poses and the shift signs alone; None (default) = ``seed``.
         min_clearance: test cameras need this clearance (metres) from non-free cells.
         vlad_clusters: k-means clusters of the VLAD codebook (trained on the no-marker map).
     """
@@ -301,8 +305,14 @@ class EvaluateConfig:
     tag_scale: float = 1.0
     shift: float = 0.0
     seed: int = 0
+    test_seed: int | None = None
     min_clearance: float = 0.1
     vlad_clusters: int = 64
+
+    @property
+    def pose_seed(self) -> int:
+        """Seed of the test poses and shift signs: ``test_seed``, else ``seed``."""
+        return self.seed if self.test_seed is None else self.test_seed
 
 
 def validate_evaluate_config(config: EvaluateConfig) -> None:
@@ -390,7 +400,7 @@ def build_placements(data, placement_config, config: EvaluateConfig,
     runs: list[PlacementRun] = []
 
     def add(method, run, k, markers):
-        markers = shift_markers(scale_markers(markers, config.tag_scale), config.shift, config.seed)
+        markers = shift_markers(scale_markers(markers, config.tag_scale), config.shift, config.pose_seed)
         runs.append(PlacementRun(method, run, k, tuple(markers)))
 
     if "none" in config.methods:
@@ -399,7 +409,7 @@ def build_placements(data, placement_config, config: EvaluateConfig,
         omp = place(data, replace(placement_config, k=max(ks), method="omp"), progress=False)
         for k in ks:
             add("omp", 0, k, omp.markers[:k])
-    for method in ("random", "uniform"):
+    for method in BASELINE_METHODS:
         if method in config.methods:
             for run in range(config.runs):
                 for k in ks:

@@ -540,7 +540,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     test_poses = {}
     base_key = cache.hash_of("testbed-v1", cache.scene_hash(scene), map_poses)
     for ts in config.test_sets:  # a test set's seed does not depend on which other sets run
-        tcfg = ev.TestPoseConfig(num=config.tests, mode=ts, seed=config.seed + 1000 * ev.TEST_SETS.index(ts),
+        tcfg = ev.TestPoseConfig(num=config.tests, mode=ts, seed=config.pose_seed + 1000 * ev.TEST_SETS.index(ts),
                                  min_clearance=config.min_clearance)
         path = out / f"test_poses_{ts}.npz"
         key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing)

@@ -1,13 +1,15 @@
-"""Paired comparisons of placements on the same test images (is a lead real or noise?).
+"""Paired comparisons of placements on the same test images, with bootstrap intervals.
 
-Every method is evaluated on the *same* test images, so the difference of two recalls is best
-judged image by image: for a method ``a`` and a baseline ``b`` with runs ``r = 1..R``, the
-per-image difference is ``d_i = hit_a[i] - mean_r hit_b,r[i]``; its mean is exactly
-``recall(a) - mean_r recall(b, r)``. The 95 % interval comes from a paired bootstrap over test
-images (resampling images, keeping each image's outcomes under every method together).
+Every method is evaluated on the *same* test images, so two recalls are best compared image by
+image. For a candidate method ``a`` (one placement) and a baseline ``b`` with runs
+``r = 1..R`` (different random / uniform placements), the reported difference is
+``recall(a) - mean_r recall(b, r)``.
 
-The interval covers the sampling of test images only: the spread between baseline runs
-(different random / uniform placements) is what the ``± std`` of the recall tables shows.
+Its 95 % interval is a two-stage bootstrap: each replicate resamples the test images (keeping
+an image's outcomes under every method together: the pairing) and, when ``R >= 2``, also the
+baseline runs. It therefore covers both the choice of test images and the spread between
+baseline placements, as far as ``R`` runs can show it. With one run the interval covers the
+test images only. The cells of a table are not corrected for multiple comparisons.
 """
 
 from __future__ import annotations
@@ -16,36 +18,49 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..evaluation import BASELINE_METHODS
 from .tables import display_name
 
-#: Methods that are baselines (several seeded runs) rather than candidates.
-BASELINES = ("random", "uniform")
 
-
-def bootstrap_mean_ci(diff: np.ndarray, n_boot: int = 2000, seed: int = 0,
-                      level: float = 0.95) -> tuple[float, float, float]:
-    """Mean of ``diff`` and its percentile-bootstrap confidence interval.
+def bootstrap_difference(own: np.ndarray, base: np.ndarray, n_boot: int = 2000, seed: int = 0,
+                         level: float = 0.95) -> tuple[float, float, float]:
+    """Mean difference ``own - base`` over images (and base runs) with a bootstrap interval.
 
     Args:
-        diff: (n,) per-image differences (any real values).
-        n_boot: bootstrap resamples.
+        own: (n,) per-image outcomes of the candidate (e.g. hits as 0/1).
+        base: (R, n) per-image outcomes of the baseline's R runs on the same images.
+        n_boot: bootstrap replicates (>= 1).
         seed: seed of ``numpy.random.default_rng``.
-        level: confidence level of the two-sided interval.
+        level: two-sided confidence level in (0, 1).
 
     Returns:
-        (mean, low, high); NaNs for an empty input.
+        (difference, low, high): ``mean(own) - mean(base)`` and the percentile interval of the
+        replicates, which resample images and, for R >= 2, runs. NaNs for no images.
     """
-    diff = np.asarray(diff, dtype=float).reshape(-1)
-    if diff.size == 0:
+    if n_boot < 1 or not 0.0 < level < 1.0:
+        raise ValueError("n_boot must be >= 1 and level in (0, 1)")
+    own = np.asarray(own, dtype=float).reshape(-1)
+    base = np.atleast_2d(np.asarray(base, dtype=float))
+    if base.shape[1] != own.size:
+        raise ValueError("own and base must cover the same test images")
+    n, runs = own.size, base.shape[0]
+    if n == 0:
         return float("nan"), float("nan"), float("nan")
     rng = np.random.default_rng(seed)
-    means = np.empty(n_boot)
+    reps = np.empty(n_boot)
     for b0 in range(0, n_boot, 256):  # bounded memory for large test sets
         nb = min(256, n_boot - b0)
-        means[b0:b0 + nb] = diff[rng.integers(0, diff.size, (nb, diff.size))].mean(axis=1)
+        images = rng.integers(0, n, (nb, n))
+        base_means = base[:, images].mean(axis=2)  # (R, nb): each run on the resampled images
+        if runs > 1:
+            picked = rng.integers(0, runs, (nb, runs))
+            base_mean = np.take_along_axis(base_means.T, picked, axis=1).mean(axis=1)
+        else:
+            base_mean = base_means[0]
+        reps[b0:b0 + nb] = own[images].mean(axis=1) - base_mean
     alpha = (1.0 - level) / 2.0
-    low, high = np.quantile(means, [alpha, 1.0 - alpha])
-    return float(diff.mean()), float(low), float(high)
+    low, high = np.quantile(reps, [alpha, 1.0 - alpha])
+    return float(own.mean() - base.mean()), float(low), float(high)
 
 
 def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequence[int],
@@ -54,34 +69,40 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
 
     Args:
         hits: (method, run, k) -> (n,) bool, the test images localized within the threshold;
-            all arrays index the same test images.
+            all arrays index the same test images. Candidates are the methods other than
+            ``none`` and the baselines (:data:`~markerplace.evaluation.BASELINE_METHODS`).
         ks: marker budgets to compare.
-        n_boot, seed: bootstrap settings (:func:`bootstrap_mean_ci`).
+        n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 
     Returns:
         One dict per (method, baseline, k) present: ``method, baseline, k, diff, low, high``
         (differences in recall fractions) and ``runs`` (baseline runs averaged).
     """
-    methods = list(dict.fromkeys(m for (m, _, _) in hits if m not in BASELINES and m != "none"))
+    methods = list(dict.fromkeys(m for (m, _, _) in hits if m not in BASELINE_METHODS and m != "none"))
     out = []
     for method in methods:
-        for baseline in BASELINES:
+        for baseline in BASELINE_METHODS:
             for k in ks:
                 own = [h for (m, _, kk), h in hits.items() if m == method and kk == k]
-                base = [h for (m, _, kk), h in hits.items() if m == baseline and kk == k]
+                base = [h for (m, _, kk), h in sorted(hits.items(), key=lambda kv: kv[0])
+                        if m == baseline and kk == k]
                 if len(own) != 1 or not base:
                     continue
-                diff = own[0].astype(float) - np.mean(np.asarray(base, dtype=float), axis=0)
-                mean, low, high = bootstrap_mean_ci(diff, n_boot, seed)
-                out.append(dict(method=method, baseline=baseline, k=int(k), diff=mean, low=low,
+                diff, low, high = bootstrap_difference(own[0], np.asarray(base), n_boot, seed)
+                out.append(dict(method=method, baseline=baseline, k=int(k), diff=diff, low=low,
                                 high=high, runs=len(base)))
     return out
 
 
 def format_difference(d: dict) -> str:
-    """``"+1.3 [-0.7, +3.3]"`` in recall percentage points; bold when the interval is above 0."""
+    """``"+1.3 [-0.7, +3.3]"`` in recall percentage points; bold when the whole interval is above
+    zero, italic when it is below zero."""
     text = f"{100 * d['diff']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}]"
-    return f"**{text}**" if d["low"] > 0 else text
+    if d["low"] > 0:
+        return f"**{text}**"
+    if d["high"] < 0:
+        return f"*{text}*"
+    return text
 
 
 def paired_table(diffs: Sequence[dict], ks: Sequence[int]) -> str:
@@ -118,8 +139,8 @@ def paired_markdown(hits_by_test_set: Mapping[str, Mapping[tuple[str, int, int],
     if not parts:
         return ""
     intro = ("Method minus the baseline's mean over runs, on the same test images, in recall "
-             "percentage points; the interval is a paired bootstrap over test images (bold: "
-             "the whole interval is above zero). It does not include the spread between "
-             "baseline runs (the tables' ± std).")
+             "percentage points, with a 95 % bootstrap interval that resamples the test images "
+             "(paired) and, with 2 or more runs, the baseline runs. Bold: the whole interval is "
+             "above zero; italic: below zero. Cells are not corrected for multiple comparisons.")
     return "\n".join([f"## Paired differences at {threshold_label} (95 % interval)", "", intro, ""]
                      + parts)
