@@ -106,16 +106,23 @@ def test_compiled_kernel_matches_numpy_whitening() -> None:
     T, pts, idx = _scene(rng, n_poses=12, per_pose=80)
     ns = rng.integers(0, 30, len(pts))
     noise = NoiseConfig(max_range=4.0, pixel_sigma=1.7)
-    Lam = pose_information(T, K, pts, idx, ns, noise) - np.eye(6) / noise.prior_sigma**2
+    K2 = np.array([[410.0, 0.0, 300.0], [0.0, 270.0, 225.0], [0.0, 0.0, 1.0]])  # fx != fy
+    Lam = pose_information(T, K2, pts, idx, ns, noise) - np.eye(6) / noise.prior_sigma**2
     for n in range(len(T)):
         sel = idx == n
         p_c = (pts[sel] - T[n, :3, 3]) @ T[n, :3, :3]
         x, y, z = p_c.T[:, None]
         valid = (z > 1e-6) & (np.sum(p_c**2, 1)[None] <= noise.max_range**2)
         var = noise.landmark_sigma**2 * (1.0 + ns[sel][None])
-        ref = _gram(_whitened_jacobians(x, y, z, var, valid, K, noise.pixel_sigma))[0]
+        ref = _gram(_whitened_jacobians(x, y, z, var, valid, K2, noise.pixel_sigma))[0]
         np.testing.assert_allclose(Lam[n], ref, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(ref).max()))
     assert np.any(np.sum((pts - T[idx, :3, 3]) ** 2, 1) > noise.max_range**2)  # range cut exercised
+    # a non-finite point is dropped, not spread as NaN over its pose
+    bad = pts.copy()
+    bad[0] = np.nan
+    with_nan = pose_information(T, K2, bad, idx, ns, noise) - np.eye(6) / noise.prior_sigma**2
+    np.testing.assert_allclose(with_nan, pose_information(T, K2, pts[1:], idx[1:], ns[1:], noise)
+                               - np.eye(6) / noise.prior_sigma**2, rtol=1e-12, atol=1e-9)
 
 
 def test_pose_information_single_landmark_closed_form() -> None:

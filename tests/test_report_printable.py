@@ -32,16 +32,22 @@ def rasterize(svg: str, px_per_mm: float) -> np.ndarray:
 def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
     from pupil_apriltags import Detector
 
-    svg = tag_svg(tag_id, size, "caption & <text>")
+    svg = tag_svg(tag_id, size, ["caption & <text>", "second line"])
     root = ET.fromstring(svg)  # well-formed, caption escaped
     width = float(root.get("width").removesuffix("mm"))
     height = float(root.get("height").removesuffix("mm"))
     assert width == pytest.approx(1000 * outer_size(size), abs=1e-3)
     assert height > width
     assert "caption &amp; &lt;text&gt;" in svg
-    long_caption = tag_svg(tag_id, size, "x" * 120)
+    # the caption's longest line fits the sheet width in a real sans-serif font
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextPath
+
+    line = "#12  tag36h11 id 586  black square 410 mm" + "x" * 30
+    long_caption = tag_svg(tag_id, size, [line, "short"])
     font = float(re.search(r'font-size="([0-9.]+)"', long_caption).group(1))
-    assert 120 * 0.55 * font <= width  # the caption fits the sheet's width
+    assert TextPath((0, 0), line, size=font, prop=FontProperties(family=["sans-serif"])).get_extents().width <= width
+    assert long_caption.count("<text ") == 2
     img = rasterize(svg, px_per_mm=240 / width)
     # the drawn modules are the tag's: compare with the reference bits, module by module
     bits = tag_modules(tag_id).shape[0]
@@ -54,8 +60,8 @@ def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
 
 def test_write_tag_sheets_names_captions_and_cleanup(tmp_path) -> None:
     rec = dict(order=3, tag_id=17, family="tag36h11", size=0.4, position=[1.0, 2.5, 1.5], yaw_deg=90.0)
-    cap = caption_for(rec)
-    assert cap.startswith("#3  tag36h11 id 17  black square 400 mm  centre (1.00, 2.50, 1.50) m  facing 90 deg")
+    assert caption_for(rec) == ["#3  tag36h11 id 17  black square 400 mm",
+                                "tag centre (1.00, 2.50, 1.50) m, facing 90 deg", "this side down"]
     (tmp_path / "tags").mkdir()
     (tmp_path / "tags" / "01_tag5.svg").write_text("stale")
     paths = write_tag_sheets(tmp_path / "tags", [rec, {**rec, "order": 4, "tag_id": 18}])

@@ -8,8 +8,8 @@ and the 21 distinct entries of the symmetric 6x6 sum accumulated as scalars, pos
 threads with ``numba.prange``.
 
 The kernel is compiled on first use and cached on disk by numba (``cache=True``: the
-``__pycache__`` folder next to this file, or ``NUMBA_CACHE_DIR``), so later processes start
-without compiling.
+``__pycache__`` folder next to this file, ``~/.cache/numba`` when that is read-only, or
+``NUMBA_CACHE_DIR``), so later processes start without compiling.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ def landmark_information_sums(R: np.ndarray, c_off: np.ndarray, pts: np.ndarray,
         var: (P,) float64 isotropic landmark variance per axis, m^2 (0 = known point).
         fx, fy: focal lengths, pixels.
         sig2: pixel noise variance, pixel^2.
-        max_r2: squared range limit, m^2; farther landmarks and those with z <= 1e-6 m are
-            skipped.
+        max_r2: squared range limit, m^2; farther landmarks, those with z <= 1e-6 m and
+            non-finite ones are skipped.
         out: (N, 6, 6) float64, overwritten; tangent order (omega, nu), 1/rad^2 and 1/m^2.
     """
     N = R.shape[0]
@@ -64,7 +64,7 @@ def landmark_information_sums(R: np.ndarray, c_off: np.ndarray, pts: np.ndarray,
             x = r00 * px + r10 * py + r20 * pz + c0
             y = r01 * px + r11 * py + r21 * pz + c1
             z = r02 * px + r12 * py + r22 * pz + c2
-            if z <= 1e-6 or x * x + y * y + z * z > max_r2:
+            if not (z > 1e-6 and x * x + y * y + z * z <= max_r2):  # also drops NaN points
                 continue
             rho = 1.0 / z
             u = x * rho

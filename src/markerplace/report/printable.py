@@ -27,25 +27,28 @@ def tag_modules(tag_id: int) -> np.ndarray:
     return tag_image(tag_id, pixels_per_bit=1) < 128
 
 
-def tag_svg(tag_id: int, size_m: float, caption: str) -> str:
+def tag_svg(tag_id: int, size_m: float, caption: Sequence[str]) -> str:
     """SVG document of one tag at physical size.
 
     Args:
         tag_id: tag36h11 id.
         size_m: black-square edge, metres.
-        caption: text printed under the quiet zone (one line).
+        caption: lines of text printed under the quiet zone.
 
     Returns:
         SVG text; width = outer edge and height = outer edge + caption strip, in mm. Black
-        modules are drawn as horizontal runs of rectangles on a white background.
+        modules are drawn as horizontal runs of rectangles on a white background; the caption
+        font is as large as the strip allows while the longest line fits the width.
     """
     modules = tag_modules(tag_id)
     bits = TAG_BITS + 2 * QUIET_BITS
     edge_mm = outer_size(size_m) * 1000.0
     cell = edge_mm / bits
-    strip = max(8.0, 0.06 * edge_mm)
-    # about 0.55 em per glyph: keep the caption inside the sheet's width
-    font = min(0.45 * strip, 0.95 * edge_mm / (0.55 * max(len(caption), 1)))
+    lines = list(caption) or [""]
+    line_mm = max(6.0, 0.04 * edge_mm)
+    strip = line_mm * (len(lines) + 0.5)
+    # about 0.55 em per glyph in a sans-serif font: keep the longest line inside the width
+    font = min(0.75 * line_mm, 0.95 * edge_mm / (0.55 * max(1, max(len(t) for t in lines))))
     rects = []
     for r in range(bits):
         c = 0
@@ -60,23 +63,24 @@ def tag_svg(tag_id: int, size_m: float, caption: str) -> str:
             else:
                 c += 1
     height = edge_mm + strip
+    texts = [f'<text x="{edge_mm / 2:.4f}" y="{edge_mm + (i + 1) * line_mm:.4f}" xml:space="preserve" '
+             f'font-family="sans-serif" font-size="{font:.3f}" text-anchor="middle" fill="black">'
+             f'{escape(t)}</text>' for i, t in enumerate(lines)]
     return "\n".join([
         '<?xml version="1.0" encoding="UTF-8"?>',
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{edge_mm:.3f}mm" height="{height:.3f}mm" '
         f'viewBox="0 0 {edge_mm:.4f} {height:.4f}">',
         f'<rect x="0" y="0" width="{edge_mm:.4f}" height="{height:.4f}" fill="white"/>',
-        '<g fill="black" shape-rendering="crispEdges">', *rects, "</g>",
-        f'<text x="{edge_mm / 2:.4f}" y="{edge_mm + 0.7 * strip:.4f}" font-family="sans-serif" '
-        f'font-size="{font:.3f}" text-anchor="middle" fill="black">{escape(caption)}</text>',
-        "</svg>", ""])
+        '<g fill="black" shape-rendering="crispEdges">', *rects, "</g>", *texts, "</svg>", ""])
 
 
-def caption_for(record: dict) -> str:
-    """One-line caption of a ``placement.json`` marker record."""
+def caption_for(record: dict) -> list[str]:
+    """Caption lines of a ``placement.json`` marker record."""
     x, y, z = record["position"]
-    return (f"#{record['order']}  {record['family']} id {record['tag_id']}  "
-            f"black square {1000 * record['size']:.0f} mm  centre ({x:.2f}, {y:.2f}, {z:.2f}) m  "
-            f"facing {record['yaw_deg']:.0f} deg  (this side down)")
+    return [f"#{record['order']}  {record['family']} id {record['tag_id']}  "
+            f"black square {1000 * record['size']:.0f} mm",
+            f"tag centre ({x:.2f}, {y:.2f}, {z:.2f}) m, facing {record['yaw_deg']:.0f} deg",
+            "this side down"]
 
 
 def write_tag_sheets(folder: str | Path, records: Sequence[dict]) -> list[Path]:
