@@ -7,6 +7,8 @@ import pytest
 
 from markerplace.report.paired import (
     bootstrap_difference,
+    fixed_broken,
+    fixed_broken_table,
     format_difference,
     paired_differences,
     paired_markdown,
@@ -73,3 +75,20 @@ def test_paired_table_and_markdown() -> None:
     assert "## Paired differences at 5cm/5deg" in md and "### Test set `weighted`" in md
     assert "`uniform`" not in md
     assert paired_markdown({"weighted": {("none", 0, 0): np.ones(3, bool)}}, [5], "x") == ""
+
+
+def test_fixed_and_broken_images() -> None:
+    none = np.array([1, 1, 0, 0, 0], bool)
+    hits = {("none", 0, 0): none,
+            ("omp", 0, 5): np.array([1, 0, 1, 1, 0], bool),      # fixes 2, breaks 1
+            ("random", 0, 5): np.array([1, 1, 1, 0, 0], bool),   # fixes 1
+            ("random", 1, 5): np.array([0, 1, 1, 1, 1], bool)}   # fixes 3, breaks 1
+    rows = {(r["method"], r["k"]): r for r in fixed_broken(hits, [5, 10])}
+    assert set(rows) == {("omp", 5), ("random", 5)}
+    assert (rows[("omp", 5)]["fixed"], rows[("omp", 5)]["broken"]) == (2.0, 1.0)
+    assert (rows[("random", 5)]["fixed"], rows[("random", 5)]["broken"], rows[("random", 5)]["runs"]) == (2.0, 0.5, 2)
+    table = fixed_broken_table(list(rows.values()), [5, 10])
+    assert "| Ours | +2 / -1 | - |" in table and "| Rand. | +2.0 / -0.5 | - |" in table
+    assert fixed_broken({k: v for k, v in hits.items() if k[0] != "none"}, [5]) == []
+    md = paired_markdown({"weighted": hits}, [5], "5cm/5deg", n_boot=50)
+    assert "fixed / broken" in md and "| Ours | +2 / -1 |" in md

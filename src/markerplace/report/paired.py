@@ -121,6 +121,46 @@ def paired_table(diffs: Sequence[dict], ks: Sequence[int]) -> str:
     return "\n".join(lines)
 
 
+def fixed_broken(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequence[int]) -> list[dict]:
+    """Test images each placement fixes and breaks relative to no markers.
+
+    Args:
+        hits: (method, run, k) -> (n,) bool hits on the same test images; must hold
+            ``("none", 0, 0)``.
+        ks: marker budgets.
+
+    Returns:
+        One dict per (method, k) present: ``method, k, fixed, broken, runs``: the mean over runs
+        of the number of images that fail without markers and succeed with them (``fixed``)
+        and the reverse (``broken``). Empty without a ``none`` entry.
+    """
+    none = hits.get(("none", 0, 0))
+    if none is None:
+        return []
+    out = []
+    for method in dict.fromkeys(m for (m, _, _) in hits if m != "none"):
+        for k in ks:
+            runs = [h for (m, _, kk), h in hits.items() if m == method and kk == k]
+            if runs:
+                h = np.asarray(runs, dtype=bool)
+                out.append(dict(method=method, k=int(k), fixed=float((h & ~none).sum(1).mean()),
+                                broken=float((~h & none).sum(1).mean()), runs=len(runs)))
+    return out
+
+
+def fixed_broken_table(rows: Sequence[dict], ks: Sequence[int]) -> str:
+    """Markdown table: rows methods, columns k, cells ``+fixed / -broken`` (run means)."""
+    lines = ["| Method | " + " | ".join(f"k={k}" for k in ks) + " |", "|---|" + "---|" * len(ks)]
+    for method in dict.fromkeys(r["method"] for r in rows):
+        cells = []
+        for k in ks:
+            r = next((r for r in rows if (r["method"], r["k"]) == (method, k)), None)
+            digits = 1 if r is not None and r["runs"] > 1 else 0
+            cells.append("-" if r is None else f"+{r['fixed']:.{digits}f} / -{r['broken']:.{digits}f}")
+        lines.append(f"| {display_name(method)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def paired_markdown(hits_by_test_set: Mapping[str, Mapping[tuple[str, int, int], np.ndarray]],
                     ks: Sequence[int], threshold_label: str, n_boot: int = 2000, seed: int = 0) -> str:
     """The ``tables.md`` section of paired differences, one table per test set ("" if none).
@@ -136,6 +176,11 @@ def paired_markdown(hits_by_test_set: Mapping[str, Mapping[tuple[str, int, int],
         diffs = paired_differences(hits, ks, n_boot, seed)
         if diffs:
             parts += [f"### Test set `{test_set}`", "", paired_table(diffs, ks), ""]
+        changes = fixed_broken(hits, ks)
+        if changes:
+            parts += [f"Test images of `{test_set}` fixed / broken by the markers (failing without "
+                      "markers and localized with them / the reverse; mean over runs):", "",
+                      fixed_broken_table(changes, ks), ""]
     if not parts:
         return ""
     intro = ("Method minus the baseline's mean over runs, on the same test images, in recall "
