@@ -96,6 +96,7 @@ def recall_vs_k(path: str | Path, ks: Sequence[int], curves: dict[str, tuple[np.
         if std is not None:
             ax.fill_between(ks, mean - std, mean + std, color=line.get_color(), alpha=0.2)
     ax.set_xlabel("number of markers k")
+    ax.set_xticks(list(ks))
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
