@@ -27,6 +27,9 @@ class MeshPart:
         texture: (H, W, 3) uint8 RGB image (row 0 = top), or None.
         base_color: (4,) float RGBA in [0, 1], multiplied with texture / vertex colour.
         normals: (N, 3) float32 unit vertex normals, or None (renderer then uses face normals).
+        transparent: glass or another see-through material (glTF ``alphaMode`` BLEND with
+            alpha < 1 or ``KHR_materials_transmission``; OBJ ``d`` < 1 or ``Tr`` > 0). It still
+            bounds free space (nobody walks through glass) but never carries a tag.
     """
 
     name: str
@@ -37,14 +40,23 @@ class MeshPart:
     texture: np.ndarray | None = None
     base_color: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     normals: np.ndarray | None = None
+    transparent: bool = False
 
 
 @dataclass(frozen=True)
 class Room:
-    """An axis-aligned room footprint of a procedural scene: (xmin, ymin, xmax, ymax) metres."""
+    """An axis-aligned room footprint of a procedural scene.
+
+    Attributes:
+        name: room name.
+        bounds: (xmin, ymin, xmax, ymax) world metres.
+        floor_z: height of the room's floor, world metres (a sunken room or an upper storey
+            differs from 0).
+    """
 
     name: str
     bounds: tuple[float, float, float, float]
+    floor_z: float = 0.0
 
     @property
     def area(self) -> float:
@@ -90,6 +102,10 @@ class Scene:
             faces.append(np.asarray(p.faces, dtype=np.int64) + offset)
             offset += len(p.vertices)
         return np.concatenate(verts), np.concatenate(faces)
+
+    def face_transparent(self) -> np.ndarray:
+        """(F,) bool per face of :meth:`geometry`: the face belongs to a transparent part."""
+        return np.concatenate([np.full(len(p.faces), bool(p.transparent)) for p in self.parts])
 
     def to_trimesh(self):
         """Untextured combined :class:`trimesh.Trimesh` for geometric queries (slicing, rays)."""
