@@ -1,9 +1,16 @@
 """Stage artifacts that know where they came from.
 
 Each stage writes its artifact next to a small ``<artifact>.meta.json`` holding the hash of the
-config and inputs it came from. :func:`is_fresh` tells whether an existing artifact can be
-reused; :func:`mark_done` records the hash after a successful (atomic) write. A stage
-interrupted half-way leaves no meta file, so it is simply recomputed next time.
+config and inputs it came from, and the size and SHA-256 of the artifact's bytes (of every file
+when the artifact is a folder). :func:`is_fresh` tells whether an existing artifact can be
+reused: same key, and the bytes on disk still match the stored size and checksum;
+:func:`mark_done` records both after a successful (atomic) write. :func:`load_fresh` also
+recovers from an artifact that verifies but cannot be read.
+
+A stage interrupted half-way leaves no meta file, so it is simply recomputed next time. A
+damaged artifact (truncated by a full disk, a crash while copying the folder, edited by hand)
+or one that fails to load is recomputed with a warning naming the file; a meta file without a
+checksum (an older version of markerplace) counts as stale.
 """
 
 from __future__ import annotations
@@ -11,13 +18,19 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 
 from .io_utils import write_json
 
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+_CHUNK = 1 << 20
 
 def config_dict(obj: Any) -> Any:
     """A JSON-ready dict of a (nested) frozen dataclass config."""
@@ -78,18 +91,102 @@ def _meta_path(artifact: Path) -> Path:
     return artifact.with_name(artifact.name + ".meta.json")
 
 
-def is_fresh(artifact: str | Path, key: str) -> bool:
-    """True when ``artifact`` exists and was made from inputs hashing to ``key``."""
+def file_checksum(path: str | Path) -> dict:
+    """``{"size": bytes, "sha256": hex}`` of one file's contents."""
+    h = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as fh:
+        while chunk := fh.read(_CHUNK):
+            h.update(chunk)
+            size += len(chunk)
+    return {"size": size, "sha256": h.hexdigest()}
+
+
+def artifact_checksum(artifact: str | Path) -> dict:
+    """Checksum of an artifact: :func:`file_checksum` of a file, or ``{"files": {relative
+    path: file checksum}}`` over every file below a folder (sorted, hidden files included)."""
     artifact = Path(artifact)
-    meta = _meta_path(artifact)
-    if not (artifact.exists() and meta.exists()):
+    if artifact.is_dir():
+        files = sorted(p for p in artifact.rglob("*") if p.is_file())
+        return {"files": {p.relative_to(artifact).as_posix(): file_checksum(p) for p in files}}
+    return file_checksum(artifact)
+
+
+def _verify(artifact: Path, meta: dict) -> str | None:
+    """None when ``artifact`` matches the checksum in ``meta``, else why it does not."""
+    stored = {k: meta[k] for k in ("size", "sha256", "files") if k in meta}
+    if not stored:
+        return "its meta file has no checksum (written by an older version)"
+    try:
+        actual = artifact_checksum(artifact)
+    except OSError as err:
+        return f"it cannot be read ({err.__class__.__name__})"
+    if "files" in stored:
+        want, got = stored["files"], actual.get("files")
+        if got is None:
+            return "it is no longer a folder"
+        missing = sorted(set(want) - set(got))
+        if missing:
+            return f"{missing[0]} is missing"
+        for name, c in want.items():
+            if got[name] != c:
+                return f"{name} is {got[name]['size']} bytes with checksum {got[name]['sha256'][:12]}, " \
+                       f"expected {c['size']} bytes with checksum {c['sha256'][:12]}"
+        return None
+    if "size" not in actual:
+        return "it is a folder, expected a file"
+    if actual["size"] != stored.get("size"):
+        return f"it is {actual['size']} bytes, expected {stored.get('size')} (truncated or overwritten)"
+    if actual["sha256"] != stored.get("sha256"):
+        return "its checksum does not match (damaged or overwritten)"
+    return None
+
+
+def is_fresh(artifact: str | Path, key: str) -> bool:
+    """True when ``artifact`` exists, was made from inputs hashing to ``key`` and its bytes still
+    match the checksum recorded by :func:`mark_done`.
+
+    A key mismatch (other settings) returns False silently; an artifact whose key matches but
+    whose bytes do not (damaged, partial) returns False with a warning naming the file.
+    """
+    artifact = Path(artifact)
+    meta_path = _meta_path(artifact)
+    if not (artifact.exists() and meta_path.exists()):
         return False
     try:
-        return json.loads(meta.read_text()).get("key") == key
-    except (OSError, json.JSONDecodeError):
+        meta = json.loads(meta_path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        log.warning("cache: %s is unreadable; recomputing %s", meta_path, artifact)
         return False
+    if not isinstance(meta, dict) or meta.get("key") != key:
+        return False
+    problem = _verify(artifact, meta)
+    if problem is not None:
+        level = logging.INFO if "older version" in problem else logging.WARNING
+        log.log(level, "cache: %s is not usable: %s; recomputing it", artifact, problem)
+        return False
+    return True
+
+
+def load_fresh(artifact: str | Path, key: str, loader: Callable[[Path], T]) -> T | None:
+    """``loader(artifact)`` when :func:`is_fresh`, else None.
+
+    An artifact that verifies but fails to load (any exception from ``loader``) also gives
+    None, with a warning naming the file, so the caller recomputes it.
+    """
+    artifact = Path(artifact)
+    if not is_fresh(artifact, key):
+        return None
+    try:
+        return loader(artifact)
+    except Exception as err:  # noqa: BLE001 - any unreadable artifact is recomputed
+        reason = " ".join(str(err).split())[:160] or err.__class__.__name__
+        log.warning("cache: could not read %s (%s: %s); recomputing it", artifact, err.__class__.__name__, reason)
+        return None
 
 
 def mark_done(artifact: str | Path, key: str, **info: Any) -> None:
-    """Record that ``artifact`` was written from inputs hashing to ``key``."""
-    write_json(_meta_path(Path(artifact)), {"key": key, **info})
+    """Record that ``artifact`` (a file or a folder) was written from inputs hashing to ``key``,
+    with its size and SHA-256 (see :func:`artifact_checksum`)."""
+    artifact = Path(artifact)
+    write_json(_meta_path(artifact), {"key": key, **artifact_checksum(artifact), **info})

@@ -175,8 +175,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     t0 = time.perf_counter()
     disc_key = cache.hash_of("discretize-v1", cache.scene_hash(scene), config.discretize)
     disc_path = run_dir / "discretization.npz"
-    if cache.is_fresh(disc_path, disc_key):
-        disc = load_discretization(disc_path)
+    disc = cache.load_fresh(disc_path, disc_key, load_discretization)
+    if disc is not None:
         log.info("discretize: reusing %s", disc_path)
     else:
         disc = discretize(scene, config.discretize)
@@ -196,8 +196,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     # the worker count changes speed, not results: keep it out of the key
     obs_key = cache.hash_of("observe-v1", disc_key, replace(config.observe, workers=0), all_T, sizes)
     obs_path = run_dir / "observations.h5"
-    if cache.is_fresh(obs_path, obs_key):
-        obs = Observations.load(obs_path)
+    obs = cache.load_fresh(obs_path, obs_key, Observations.load)
+    if obs is not None:
         log.info("observe: reusing %s", obs_path)
     else:
         log.info("observe: rendering and extracting SIFT at %d poses", N)
@@ -211,8 +211,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     if config.placement.similarity:
         sim_key = cache.hash_of("similarity-v1", obs_key, config.similarity)
         sim_path = run_dir / "similarity.npz"
-        if cache.is_fresh(sim_path, sim_key):
-            n_similar = np.load(sim_path)["n_similar"]
+        n_similar = cache.load_fresh(sim_path, sim_key, lambda p: np.load(p, allow_pickle=False)["n_similar"])
+        if n_similar is not None:
             log.info("similarity: reusing %s", sim_path)
         else:
             n_similar = count_similar(obs.descriptors, obs.points_world, config.similarity)

@@ -450,18 +450,22 @@ class BaseImages:
                                 testbed.config.occlusion_tolerance)
         feat_dir, vis_path = self.folder / "features", self.folder / "visibility.npy"
         vis = None
-        if FeatureSet.exists(feat_dir) and cache.is_fresh(feat_dir / "offsets.npy", feat_key):
-            self.features = FeatureSet.load(feat_dir)
+        cached = cache.load_fresh(feat_dir, feat_key, FeatureSet.load) if FeatureSet.exists(feat_dir) else None
+        if cached is not None:
+            self.features = cached
             log.info("%s: reusing marker-free features in %s", name, feat_dir)
         else:
             res = testbed.render_features(world_from_cam, range(len(world_from_cam)), [], True, map_only, f"{name} (no markers)")
             self.features = FeatureSet.from_images([res[i][0] for i in range(len(world_from_cam))])
             self.features.save(feat_dir)
-            cache.mark_done(feat_dir / "offsets.npy", feat_key)
+            cache.mark_done(feat_dir, feat_key)
             vis = np.stack([res[i][1] for i in range(len(world_from_cam))]) if len(world_from_cam) else None
-        if vis is None and cache.is_fresh(vis_path, vis_key):
-            vis = np.load(vis_path, allow_pickle=False)
+        if vis is None:
+            vis = cache.load_fresh(vis_path, vis_key, lambda p: np.load(p, allow_pickle=False))
+            cached_vis = vis is not None
         else:
+            cached_vis = False
+        if not cached_vis:
             if vis is None:  # features cached, markers changed: depth-only renders
                 jobs = [(i, world_from_cam[i]) for i in range(len(world_from_cam))]
                 got = dict(testbed._run(_visibility_job, jobs, f"{name} (marker visibility)"))
@@ -469,6 +473,12 @@ class BaseImages:
             write_npy(vis_path, vis)
             cache.mark_done(vis_path, vis_key)
         self.visibility = vis.reshape(len(world_from_cam), len(testbed.union))
+
+
+def _load_errors(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(t_err, r_err) of a cached ``results_<key>.npz``."""
+    with np.load(path, allow_pickle=False) as f:
+        return f["t_err"], f["r_err"]
 
 
 def _localizer_config(config):
@@ -544,8 +554,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
                                  min_clearance=config.min_clearance)
         path = out / f"test_poses_{ts}.npz"
         key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing)
-        if cache.is_fresh(path, key):
-            test_poses[ts] = ev.TestPoses.load(path)
+        loaded = cache.load_fresh(path, key, ev.TestPoses.load)
+        if loaded is not None:
+            test_poses[ts] = loaded
         else:
             test_poses[ts] = ev.sample_test_poses(map_poses, data.base_score, plan_config.discretize.grid_spacing, tcfg, is_free)
             test_poses[ts].save(path)
@@ -567,9 +578,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         cb_key = cache.hash_of("vlad-v1", base_key, tb_key_cfg, config.vlad_clusters, config.seed)
         from .localization.vlad import VladCodebook
 
-        if cache.is_fresh(codebook_path, cb_key):
-            codebook = VladCodebook.load(codebook_path)
-        else:
+        codebook = cache.load_fresh(codebook_path, cb_key, VladCodebook.load)
+        if codebook is None:
             codebook = VladCodebook.train(map_base.features.descriptors.astype(np.float32),
                                           num_clusters=config.vlad_clusters, seed=config.seed)
             codebook.save(codebook_path)
@@ -590,9 +600,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             for ts in config.test_sets:
                 rkey = cache.hash_of("results-v1", cb_key, test_poses[ts].world_from_cam, marker_arr, lcfg, tb_key_cfg)
                 rpath = cache_dir / f"results_{rkey}.npz"
-                if cache.is_fresh(rpath, rkey):
-                    with np.load(rpath, allow_pickle=False) as f:
-                        results[(p.method, p.run, p.k, ts)] = (f["t_err"], f["r_err"])
+                got = cache.load_fresh(rpath, rkey, _load_errors)
+                if got is not None:
+                    results[(p.method, p.run, p.k, ts)] = got
                 else:
                     pending.append((ts, rkey, rpath))
             if not pending:
