@@ -5,13 +5,9 @@ edges are wall centre lines, doors between pairs of rooms, and per-room furnitur
 room-local coordinates (metres from the room's (xmin, ymin) corner), so two rooms with the same
 contents are identical up to a translation.
 
-Geometry is made of boxes and quads only. Parts are grouped by material (texture + colour), so a
-whole scene is a few dozen :class:`MeshPart` and repeated items share one texture array.
-
-Furniture local frame: x = width, y = depth with the item's FRONT facing -y, z up, origin at the
-footprint centre on the floor. ``yaw_deg`` turns the item counter-clockwise about z; its front
-then faces (sin yaw, -cos yaw): 0 faces -y (stands against a north wall), 180 faces +y,
-90 faces +x (against a west wall), -90 faces -x (against an east wall).
+Geometry is made of boxes and quads only (:mod:`.meshkit`). Parts are grouped by material
+(texture + colour), so a whole scene is a few dozen :class:`MeshPart` and repeated items share one
+texture array. Furniture builders, their local frame and the palette live in :mod:`.furniture`.
 """
 
 from __future__ import annotations
@@ -23,7 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import textures as tx
-from .types import MeshPart, Room, Scene
+from .furniture import FLOORS, FURNITURE, MAX_FREE_HEIGHT, TALL_AGAINST_WALL, palette, texture_fns
+from .meshkit import AXES, Material, MeshBuilder, add_box
+from .types import Room, Scene
+
+__all__ = [
+    "FURNITURE", "Door", "Item", "Layout", "Material", "MeshBuilder", "Picture", "RoomSpec",
+    "add_box", "build_scene", "validate_layout",
+]
 
 log = logging.getLogger(__name__)
 
@@ -117,372 +120,6 @@ class Layout:
     def floor_area(self) -> float:
         """Sum of room footprints in m^2 (on wall centre lines)."""
         return float(sum((r.bounds[2] - r.bounds[0]) * (r.bounds[3] - r.bounds[1]) for r in self.rooms))
-
-
-# ----------------------------------------------------------------------------------------------
-# materials and mesh accumulation
-
-
-@dataclass(frozen=True)
-class Material:
-    """Texture key (or None), RGBA base colour, and UV mapping: ``repeat`` metres per texture
-    repeat (planar, world-scaled), or None to stretch the texture once over each face."""
-
-    key: str
-    texture: str | None = None
-    color: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
-    repeat: float | None = 1.0
-
-
-class MeshBuilder:
-    """Accumulates quads per material and emits one :class:`MeshPart` per material."""
-
-    def __init__(self, scene_name: str, bank: tx.TextureBank, texture_fns: dict):
-        self.scene_name = scene_name
-        self.bank = bank
-        self.texture_fns = texture_fns
-        self._data: dict[str, dict] = {}
-        self._mats: dict[str, Material] = {}
-
-    def quad(self, mat: Material, corners: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> None:
-        """Add a quad: (4, 3) corners counter-clockwise seen from the ``normal`` side, (4, 2) uv."""
-        d = self._data.setdefault(mat.key, {"v": [], "uv": [], "n": []})
-        self._mats[mat.key] = mat
-        d["v"].append(np.asarray(corners, dtype=np.float64))
-        d["uv"].append(np.asarray(uv, dtype=np.float64))
-        d["n"].append(np.broadcast_to(np.asarray(normal, dtype=np.float64), (4, 3)))
-
-    def parts(self) -> list[MeshPart]:
-        out = []
-        for key, d in self._data.items():
-            mat = self._mats[key]
-            v = np.concatenate(d["v"]).astype(np.float32)
-            n_quads = len(d["v"])
-            base = (np.arange(n_quads) * 4)[:, None]
-            faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3).astype(np.int32)
-            texture = None
-            uv = None
-            if mat.texture is not None:
-                fn, args = self.texture_fns[mat.texture]
-                texture = self.bank.get(mat.texture, fn, *args)
-                uv = np.concatenate(d["uv"]).astype(np.float32)
-            normals = np.concatenate(d["n"]).astype(np.float32)
-            for arr in (v, faces, uv, normals):
-                if arr is not None:
-                    arr.flags.writeable = False
-            out.append(
-                MeshPart(
-                    name=f"{self.scene_name}/{key}",
-                    vertices=v,
-                    faces=faces,
-                    uv=uv,
-                    texture=texture,
-                    base_color=tuple(float(c) for c in mat.color),
-                    normals=normals,
-                )
-            )
-        return out
-
-
-_AXES = {
-    "+x": (np.array([1.0, 0, 0]), np.array([0, 0, 1.0])),
-    "-x": (np.array([-1.0, 0, 0]), np.array([0, 0, 1.0])),
-    "+y": (np.array([0, 1.0, 0]), np.array([0, 0, 1.0])),
-    "-y": (np.array([0, -1.0, 0]), np.array([0, 0, 1.0])),
-    "+z": (np.array([0, 0, 1.0]), np.array([0, 1.0, 0])),
-    "-z": (np.array([0, 0, -1.0]), np.array([0, -1.0, 0])),
-}
-
-
-def _face(lo: np.ndarray, hi: np.ndarray, face: str):
-    """Corners (4, 3), uv-plane coordinates (4, 2) in metres, normal, extent (w, h) of a box face.
-
-    Corners go bottom-left, bottom-right, top-right, top-left as seen from outside: counter-clockwise.
-    Right = up x normal, so images on vertical faces read left to right and upright.
-    """
-    n, up = _AXES[face]
-    right = np.cross(up, n)
-    c = (lo + hi) / 2
-    half = (hi - lo) / 2
-    c = c + n * (np.abs(n) @ half)  # centre of the face
-    hr = np.abs(right) @ half
-    hu = np.abs(up) @ half
-    corners = np.array([c - right * hr - up * hu, c + right * hr - up * hu, c + right * hr + up * hu, c - right * hr + up * hu])
-    plane = np.stack([corners @ right, corners @ up], axis=1)
-    return corners, plane, n, (2 * hr, 2 * hu)
-
-
-def add_box(
-    mb: MeshBuilder,
-    lo,
-    hi,
-    mats: Material | dict[str, Material],
-    transform: tuple[float, np.ndarray] | None = None,
-    skip: tuple[str, ...] = ("-z",),
-) -> None:
-    """Add an axis-aligned box [lo, hi] (local metres) with one material or one per face.
-
-    ``mats`` may map face names ("+x", "-x", "+y", "-y", "+z", "-z", or "*" for the rest) to
-    materials. ``transform`` = (yaw radians, (3,) translation) places the local box in the world.
-    Faces in ``skip`` are omitted (default: the bottom, which stands on something).
-    """
-    lo = np.asarray(lo, dtype=float)
-    hi = np.asarray(hi, dtype=float)
-    if transform is not None:
-        yaw, t = transform
-        c, s = np.cos(yaw), np.sin(yaw)
-        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-    for face in _AXES:
-        if face in skip:
-            continue
-        mat = mats if isinstance(mats, Material) else mats.get(face, mats.get("*"))
-        if mat is None:
-            continue
-        corners, plane, n, (w, h) = _face(lo, hi, face)
-        if w <= 0 or h <= 0:
-            continue
-        if mat.repeat is None:
-            uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-        else:
-            uv = plane / mat.repeat
-        if transform is not None:
-            corners = corners @ R.T + t
-            n = R @ n
-        mb.quad(mat, corners, uv, n)
-
-
-# ----------------------------------------------------------------------------------------------
-# furniture: each builder adds boxes in the item frame (front faces -y), origin on the floor
-
-
-def _desk(mb, pal, T, rng, v):
-    w, d, h, top = 1.4, 0.7, 0.74, 0.03
-    add_box(mb, (-w / 2, -d / 2, h - top), (w / 2, d / 2, h), {"+z": pal["desk_top"], "*": pal["desk_edge"]}, T, skip=())
-    for sx in (-1, 1):
-        add_box(mb, (sx * w / 2 - 0.025 - sx * 0.025, -d / 2 + 0.03, 0), (sx * w / 2 + 0.025 - sx * 0.025, d / 2 - 0.03, h - top), pal["metal"], T)
-    add_box(mb, (-w / 2 + 0.05, d / 2 - 0.05, 0.35), (w / 2 - 0.05, d / 2 - 0.03, h - top), pal["desk_edge"], T)  # modesty panel
-
-
-def _monitor(mb, pal, T, rng, v):
-    # on a desk top (z 0.74), near the back
-    z0 = 0.74
-    add_box(mb, (-0.1, 0.05, z0), (0.1, 0.2, z0 + 0.02), pal["plastic_dark"], T)
-    add_box(mb, (-0.025, 0.12, z0), (0.025, 0.15, z0 + 0.15), pal["plastic_dark"], T)
-    add_box(mb, (-0.3, 0.06, z0 + 0.12), (0.3, 0.1, z0 + 0.48), {"-y": pal["screen"], "*": pal["plastic_dark"]}, T, skip=())
-    add_box(mb, (-0.22, -0.25, z0), (0.22, -0.1, z0 + 0.02), {"+z": pal["keyboard"], "*": pal["plastic_dark"]}, T)
-
-
-def _chair(mb, pal, T, rng, v):
-    add_box(mb, (-0.23, -0.23, 0.42), (0.23, 0.23, 0.5), pal["fabric"], T, skip=())
-    add_box(mb, (-0.22, 0.2, 0.55), (0.22, 0.26, 1.0), pal["fabric"], T, skip=())
-    add_box(mb, (-0.03, -0.03, 0.05), (0.03, 0.03, 0.42), pal["metal"], T)
-    add_box(mb, (-0.28, -0.04, 0.0), (0.28, 0.04, 0.05), pal["metal"], T)
-    add_box(mb, (-0.04, -0.28, 0.0), (0.04, 0.28, 0.05), pal["metal"], T)
-
-
-def _bookshelf(mb, pal, T, rng, v):
-    w, d, h = 0.9, 0.35, 2.0
-    body = pal["wood"]
-    add_box(mb, (-w / 2, -d / 2, 0), (w / 2, d / 2, h), {"-y": pal["books"], "*": body}, T)
-    # side panels proud of the book front give depth edges
-    for sx in (-1, 1):
-        add_box(mb, (sx * w / 2 - 0.02, -d / 2 - 0.02, 0), (sx * w / 2 + 0.02, -d / 2 + 0.001, h), body, T)
-
-
-def _cabinet(mb, pal, T, rng, v):
-    w, d, h = 0.8, 0.45, 1.0
-    add_box(mb, (-w / 2, -d / 2, 0), (w / 2, d / 2, h), {"-y": pal["drawers"], "+z": pal["desk_top"], "*": pal["wood"]}, T)
-
-
-def _wardrobe(mb, pal, T, rng, v):
-    w, d, h = 1.2, 0.6, 2.0
-    add_box(mb, (-w / 2, -d / 2, 0), (w / 2, d / 2, h), {"-y": pal["wardrobe_front"], "*": pal["wood"]}, T)
-
-
-def _table(mb, pal, T, rng, v, w=1.6, d=0.9):
-    h = 0.75
-    add_box(mb, (-w / 2, -d / 2, h - 0.04), (w / 2, d / 2, h), {"+z": pal["table_top"], "*": pal["desk_edge"]}, T, skip=())
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            x, y = sx * (w / 2 - 0.06), sy * (d / 2 - 0.06)
-            add_box(mb, (x - 0.025, y - 0.025, 0), (x + 0.025, y + 0.025, h - 0.04), pal["desk_edge"], T)
-
-
-def _big_table(mb, pal, T, rng, v):
-    _table(mb, pal, T, rng, v, w=2.4, d=1.1)
-
-
-def _coffee_table(mb, pal, T, rng, v):
-    add_box(mb, (-0.5, -0.3, 0.0), (0.5, 0.3, 0.42), {"+z": pal["table_top"], "*": pal["wood"]}, T)
-
-
-def _sofa(mb, pal, T, rng, v):
-    w, d = 2.0, 0.9
-    f = pal["sofa"]
-    add_box(mb, (-w / 2, -d / 2, 0), (w / 2, d / 2, 0.42), f, T)
-    add_box(mb, (-w / 2, d / 2 - 0.2, 0.42), (w / 2, d / 2, 0.85), f, T)
-    for sx in (-1, 1):
-        add_box(mb, (sx * w / 2 - 0.1 - sx * 0.1, -d / 2, 0.42), (sx * w / 2 + 0.1 - sx * 0.1, d / 2 - 0.2, 0.62), f, T)
-    for cx in (-0.45, 0.45):
-        add_box(mb, (cx - 0.42, -d / 2 + 0.05, 0.42), (cx + 0.42, d / 2 - 0.22, 0.52), pal["cushion"], T)
-
-
-def _bed(mb, pal, T, rng, v):
-    w, d = 1.6, 2.05  # headboard at +y (against the wall)
-    add_box(mb, (-w / 2, -d / 2, 0), (w / 2, d / 2, 0.3), pal["wood"], T)
-    add_box(mb, (-w / 2 + 0.03, -d / 2 + 0.03, 0.3), (w / 2 - 0.03, d / 2 - 0.05, 0.52), pal["duvet"], T)
-    add_box(mb, (-w / 2, d / 2 - 0.06, 0), (w / 2, d / 2, 1.05), pal["wood"], T)
-    for cx in (-0.38, 0.38):
-        add_box(mb, (cx - 0.3, d / 2 - 0.5, 0.52), (cx + 0.3, d / 2 - 0.12, 0.64), pal["pillow"], T)
-
-
-def _nightstand(mb, pal, T, rng, v):
-    add_box(mb, (-0.25, -0.2, 0), (0.25, 0.2, 0.55), {"-y": pal["drawers"], "*": pal["wood"]}, T)
-
-
-def _counter(mb, pal, T, rng, v):
-    w, d = 2.4, 0.62
-    add_box(mb, (-w / 2, -d / 2 + 0.05, 0), (w / 2, d / 2, 0.86), {"-y": pal["kitchen_front"], "*": pal["kitchen_body"]}, T)
-    add_box(mb, (-w / 2, -d / 2, 0.86), (w / 2, d / 2, 0.9), pal["stone"], T, skip=())
-    add_box(mb, (-0.3, -0.15, 0.9), (0.3, 0.2, 0.91), pal["metal"], T)  # sink rim
-
-
-def _fridge(mb, pal, T, rng, v):
-    add_box(mb, (-0.3, -0.32, 0), (0.3, 0.32, 1.85), {"-y": pal["fridge_front"], "*": pal["white"]}, T)
-
-
-def _tv_stand(mb, pal, T, rng, v):
-    add_box(mb, (-0.8, -0.2, 0), (0.8, 0.2, 0.5), {"-y": pal["drawers"], "*": pal["wood"]}, T)
-    add_box(mb, (-0.6, -0.03, 0.55), (0.6, 0.03, 1.25), {"-y": pal["tv"], "*": pal["plastic_dark"]}, T, skip=())
-    add_box(mb, (-0.15, -0.1, 0.5), (0.15, 0.1, 0.55), pal["plastic_dark"], T)
-
-
-def _plant(mb, pal, T, rng, v):
-    add_box(mb, (-0.18, -0.18, 0), (0.18, 0.18, 0.4), pal["pot"], T)
-    add_box(mb, (-0.3, -0.3, 0.4), (0.3, 0.3, 1.2), pal["leaves"], T, skip=())
-
-
-def _rug(mb, pal, T, rng, v):
-    add_box(mb, (-1.0, -0.7, 0.0), (1.0, 0.7, 0.01), {"+z": pal["rug"], "*": pal["rug_edge"]}, T)
-
-
-def _bathtub(mb, pal, T, rng, v):
-    add_box(mb, (-0.85, -0.38, 0), (0.85, 0.38, 0.55), pal["white"], T)
-
-
-def _sink(mb, pal, T, rng, v):
-    add_box(mb, (-0.4, -0.25, 0), (0.4, 0.25, 0.85), {"-y": pal["drawers"], "+z": pal["white"], "*": pal["wood"]}, T)
-
-
-def _printer(mb, pal, T, rng, v):
-    add_box(mb, (-0.4, -0.3, 0), (0.4, 0.3, 0.75), pal["wood"], T)
-    add_box(mb, (-0.25, -0.22, 0.75), (0.25, 0.22, 1.05), {"+z": pal["plastic_dark"], "*": pal["white"]}, T)
-
-
-# kind -> (builder, footprint width, depth, height)
-FURNITURE = {
-    "desk": (_desk, 1.4, 0.7, 0.74),
-    "monitor": (_monitor, 0.6, 0.5, 1.22),
-    "chair": (_chair, 0.56, 0.56, 1.0),
-    "bookshelf": (_bookshelf, 0.94, 0.39, 2.0),
-    "cabinet": (_cabinet, 0.8, 0.45, 1.0),
-    "wardrobe": (_wardrobe, 1.2, 0.6, 2.0),
-    "table": (_table, 1.6, 0.9, 0.75),
-    "big_table": (_big_table, 2.4, 1.1, 0.75),
-    "coffee_table": (_coffee_table, 1.0, 0.6, 0.42),
-    "sofa": (_sofa, 2.0, 0.9, 0.85),
-    "bed": (_bed, 1.6, 2.05, 1.05),
-    "nightstand": (_nightstand, 0.5, 0.4, 0.55),
-    "counter": (_counter, 2.4, 0.62, 0.91),
-    "fridge": (_fridge, 0.6, 0.64, 1.85),
-    "tv_stand": (_tv_stand, 1.6, 0.4, 1.25),
-    "plant": (_plant, 0.6, 0.6, 1.2),
-    "rug": (_rug, 2.0, 1.4, 0.01),
-    "bathtub": (_bathtub, 1.7, 0.76, 0.55),
-    "sink": (_sink, 0.8, 0.5, 0.85),
-    "printer": (_printer, 0.8, 0.6, 1.05),
-}
-TALL_AGAINST_WALL = {"bookshelf", "wardrobe", "fridge"}
-MAX_FREE_HEIGHT = 1.4
-
-
-# ----------------------------------------------------------------------------------------------
-# textures and palette
-
-
-def _texture_fns() -> dict:
-    """Texture key -> (generator, args). Generators are called at most once per build."""
-    return {
-        "wall_paint": (tx.painted_wall, ((236, 234, 228),)),
-        "wood_floor": (tx.wood_planks, (512, 8, (150, 105, 65))),
-        "wood_floor_dark": (tx.wood_planks, (512, 10, (105, 70, 45))),
-        "tiles": (tx.floor_tiles, (512, 4)),
-        "bath_tiles": (tx.floor_tiles, (256, 8, (225, 232, 235), (150, 160, 165))),
-        "carpet": (tx.carpet, (256,)),
-        "ceiling": (tx.ceiling_tiles, (256, 4)),
-        "wood": (tx.wood_grain, (256, (165, 115, 75))),
-        "wood_light": (tx.wood_grain, (256, (205, 175, 135))),
-        "fabric_blue": (tx.fabric, (128, (70, 90, 140))),
-        "fabric_grey": (tx.fabric, (128, (120, 118, 112))),
-        "fabric_red": (tx.fabric, (128, (150, 55, 50))),
-        "books": (tx.book_spines, (256, 512, 5)),
-        "screen": (tx.screen, (256, 160)),
-        "tv": (tx.photo, ("rocket", 256)),
-        "rug": (tx.rug, (256,)),
-        "stone": (tx.countertop, (256,)),
-        "leaves": (tx.foliage, (128,)),
-        "keyboard": (tx.floor_tiles, (64, 8, (50, 50, 55), (15, 15, 15))),
-        "drawers": (tx.floor_tiles, (128, 2, (170, 125, 85), (60, 45, 30))),
-        "wardrobe_front": (tx.floor_tiles, (128, 2, (215, 210, 200), (90, 85, 80))),
-        "kitchen_front": (tx.floor_tiles, (256, 4, (200, 205, 210), (70, 70, 75))),
-        "fridge_front": (tx.floor_tiles, (64, 1, (225, 228, 230), (140, 140, 145))),
-    }
-
-
-def _palette() -> dict[str, Material]:
-    M = Material
-    return {
-        "desk_top": M("desk_top", "wood_light", repeat=1.4),
-        "desk_edge": M("desk_edge", None, (0.35, 0.3, 0.28, 1.0)),
-        "metal": M("metal", None, (0.55, 0.56, 0.58, 1.0)),
-        "plastic_dark": M("plastic_dark", None, (0.12, 0.12, 0.13, 1.0)),
-        "white": M("white", None, (0.92, 0.92, 0.9, 1.0)),
-        "screen": M("screen", "screen", repeat=None),
-        "tv": M("tv", "tv", repeat=None),
-        "keyboard": M("keyboard", "keyboard", repeat=None),
-        "fabric": M("fabric", "fabric_blue", repeat=0.5),
-        "sofa": M("sofa", "fabric_grey", repeat=0.6),
-        "cushion": M("cushion", "fabric_red", repeat=0.6),
-        "duvet": M("duvet", "fabric_blue", repeat=0.8),
-        "pillow": M("pillow", None, (0.95, 0.95, 0.93, 1.0)),
-        "wood": M("wood", "wood", repeat=1.0),
-        "table_top": M("table_top", "wood", repeat=1.2),
-        "books": M("books", "books", repeat=None),
-        "drawers": M("drawers", "drawers", repeat=None),
-        "wardrobe_front": M("wardrobe_front", "wardrobe_front", repeat=None),
-        "kitchen_front": M("kitchen_front", "kitchen_front", repeat=2.4),
-        "kitchen_body": M("kitchen_body", None, (0.85, 0.86, 0.88, 1.0)),
-        "stone": M("stone", "stone", repeat=1.0),
-        "fridge_front": M("fridge_front", "fridge_front", repeat=None),
-        "pot": M("pot", None, (0.55, 0.3, 0.2, 1.0)),
-        "leaves": M("leaves", "leaves", repeat=0.5),
-        "rug": M("rug", "rug", repeat=None),
-        "rug_edge": M("rug_edge", None, (0.5, 0.15, 0.15, 1.0)),
-        "frame": M("frame", None, (0.1, 0.09, 0.08, 1.0)),
-        "trim": M("trim", None, (0.93, 0.92, 0.88, 1.0)),
-        "exterior": M("exterior", None, (0.6, 0.6, 0.6, 1.0)),
-        "light": M("light", None, (1.0, 1.0, 0.97, 1.0)),
-        "ceiling": M("ceiling", "ceiling", repeat=2.4),
-    }
-
-
-_FLOORS = {
-    "wood": ("wood_floor", 2.0),
-    "wood_dark": ("wood_floor_dark", 2.0),
-    "tiles": ("tiles", 2.0),
-    "bath_tiles": ("bath_tiles", 1.2),
-    "carpet": ("carpet", 1.0),
-}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -597,7 +234,7 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
                     slab(orient, c, start, q - ht, 0.0, H, (start_cap, False))
     for x, y in sorted(nodes):
         lo, hi = np.array([x - ht, y - ht, 0.0]), np.array([x + ht, y + ht, H])
-        mats = {f: side_mat(x + 0.2 * n[0], y + 0.2 * n[1]) for f, (n, _) in _AXES.items() if f[1] != "z"}
+        mats = {f: side_mat(x + 0.2 * n[0], y + 0.2 * n[1]) for f, (n, _) in AXES.items() if f[1] != "z"}
         # a pillar face towards a wall slab is hidden; its room test may hit either side: fine
         add_box(mb, lo, hi, mats, None, skip=("+z", "-z"))
 
@@ -609,7 +246,7 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
 def _build_room_shell(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict) -> None:
     x0, y0, x1, y1 = room.bounds
     H = layout.ceiling_height
-    tex, rep = _FLOORS[room.floor]
+    tex, rep = FLOORS[room.floor]
     floor = Material(f"floor_{room.floor}", tex, repeat=rep)
     # floor quad (up) and ceiling quad (down), UVs in room-local metres so twin rooms match
     w, d = x1 - x0, y1 - y0
@@ -741,8 +378,8 @@ def build_scene(layout: Layout, seed: int = 0) -> Scene:
     """
     validate_layout(layout)
     bank = tx.TextureBank(seed)
-    mb = MeshBuilder(layout.name, bank, _texture_fns())
-    pal = _palette()
+    mb = MeshBuilder(layout.name, bank, texture_fns())
+    pal = palette()
     wall_mats: dict[str, Material] = {}
     for room in layout.rooms:
         key = "wall_" + "_".join(str(c) for c in room.wall_color)
