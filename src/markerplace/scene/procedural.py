@@ -1,125 +1,38 @@
 """Procedural interiors: build a textured :class:`Scene` from a :class:`Layout` description.
 
-World frame: z up, metres, floor at z = 0. A layout is a set of axis-aligned room rectangles whose
+World frame: z up, metres, the floor at the layout's ``floor_z`` (0 for the single-storey
+built-ins; one layout per storey for a building, see :mod:`.house`). A layout is a set of axis-aligned room rectangles whose
 edges are wall centre lines, doors between pairs of rooms, and per-room furniture and pictures in
 room-local coordinates (metres from the room's (xmin, ymin) corner), so two rooms with the same
 contents are identical up to a translation.
 
 Geometry is made of boxes and quads only (:mod:`.meshkit`). Parts are grouped by material
 (texture + colour), so a whole scene is a few dozen :class:`MeshPart` and repeated items share one
-texture array. Furniture builders, their local frame and the palette live in :mod:`.furniture`.
+texture array. Furniture builders, their local frame and the palette live in :mod:`.furniture`;
+the layout dataclasses in :mod:`.layout`. Rooms may sit lower than their storey (``floor_dz``, a
+sunken room: walls reach down to it and openings towards it get a step) and have holes in their
+floor or ceiling (a stairwell).
 """
 
 from __future__ import annotations
 
 import logging
 import zlib
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import textures as tx
 from .furniture import FLOORS, FURNITURE, MAX_FREE_HEIGHT, TALL_AGAINST_WALL, palette, texture_fns
+from .layout import Door, Item, Layout, Picture, RoomSpec
 from .meshkit import AXES, Material, MeshBuilder, add_box
 from .types import Room, Scene
 
 __all__ = [
     "FURNITURE", "Door", "Item", "Layout", "Material", "MeshBuilder", "Picture", "RoomSpec",
-    "add_box", "build_scene", "validate_layout",
+    "add_box", "add_layout", "build_scene", "layout_rooms", "subtract_rects", "validate_layout",
 ]
 
 log = logging.getLogger(__name__)
-
-
-# ----------------------------------------------------------------------------------------------
-# layout description
-
-
-@dataclass(frozen=True)
-class Item:
-    """A piece of furniture. ``kind`` is a key of :data:`FURNITURE`; (x, y) its footprint centre in
-    room-local metres; ``yaw_deg`` its rotation (0: front faces -y); ``variant`` picks colours."""
-
-    kind: str
-    x: float
-    y: float
-    yaw_deg: float = 0.0
-    variant: int = 0
-
-
-@dataclass(frozen=True)
-class Picture:
-    """A framed picture or poster on a room wall.
-
-    Attributes:
-        wall: ``"N"`` (y max), ``"S"`` (y min), ``"E"`` (x max) or ``"W"`` (x min).
-        along: room-local coordinate of the picture centre along the wall (x for N/S, y for E/W).
-        width: picture width in metres (height follows the image aspect ratio).
-        image: a bundled photo name (:data:`textures.BUNDLED_PHOTOS`) or ``"art:<k>"`` for
-            procedural art number k, or ``"whiteboard"``.
-        z_center: height of the picture centre (default 1.5 m, eye level).
-    """
-
-    wall: str
-    along: float
-    width: float
-    image: str
-    z_center: float = 1.5
-
-
-@dataclass(frozen=True)
-class RoomSpec:
-    """A room: footprint (xmin, ymin, xmax, ymax) on wall centre lines, floor and wall finish.
-
-    Attributes:
-        floor: ``"wood"``, ``"tiles"``, ``"carpet"`` or ``"wood_dark"``.
-        wall_color: RGB 0-255 paint colour of its walls (inside faces).
-        items / pictures: contents in room-local coordinates.
-        template: rooms with the same template get identical seeded jitter (twins).
-        lights: number of ceiling light panels.
-    """
-
-    name: str
-    bounds: tuple[float, float, float, float]
-    floor: str = "wood"
-    wall_color: tuple[int, int, int] = (232, 228, 218)
-    items: tuple[Item, ...] = ()
-    pictures: tuple[Picture, ...] = ()
-    template: str | None = None
-    lights: int = 2
-
-
-@dataclass(frozen=True)
-class Door:
-    """An opening (no door leaf, no glass) in the wall shared by rooms ``a`` and ``b``.
-
-    ``at`` is the fraction along the shared wall segment of the opening centre (default 0.5);
-    ``width`` defaults to 0.95 m and ``height`` to 2.1 m (a lintel closes the wall above).
-    """
-
-    a: str
-    b: str
-    at: float = 0.5
-    width: float = 0.95
-    height: float = 2.1
-
-
-@dataclass(frozen=True)
-class Layout:
-    """A whole interior: rooms, doors, wall thickness (0.1 m) and ceiling height (2.7 m)."""
-
-    name: str
-    description: str
-    rooms: tuple[RoomSpec, ...]
-    doors: tuple[Door, ...] = ()
-    wall_thickness: float = 0.1
-    ceiling_height: float = 2.7
-    twins: tuple[tuple[str, str], ...] = field(default=())
-
-    @property
-    def floor_area(self) -> float:
-        """Sum of room footprints in m^2 (on wall centre lines)."""
-        return float(sum((r.bounds[2] - r.bounds[0]) * (r.bounds[3] - r.bounds[1]) for r in self.rooms))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -185,9 +98,14 @@ def _room_at(rooms: tuple[RoomSpec, ...], x: float, y: float) -> RoomSpec | None
 
 
 def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str, Material]) -> None:
-    """Walls as thin slabs between junction pillars, with door openings and lintels."""
+    """Walls as thin slabs between junction pillars, with door openings, lintels and steps.
+
+    Slabs and pillars reach from the lowest floor of the rooms beside them up to the ceiling
+    (``floor_z + ceiling_height``); an opening between rooms whose floors differ gets a step.
+    """
     t = layout.wall_thickness
-    H = layout.ceiling_height
+    zf = layout.floor_z
+    H = zf + layout.ceiling_height
     ht = t / 2
     nodes = {(_r(x), _r(y)) for r in layout.rooms for x in (r.bounds[0], r.bounds[2]) for y in (r.bounds[1], r.bounds[3])}
     gaps = _door_gaps(layout)
@@ -196,8 +114,13 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
         room = _room_at(layout.rooms, px, py)
         return wall_mats[room.name] if room is not None else pal["exterior"]
 
-    def slab(orient: str, c: float, a: float, b: float, z0: float, z1: float, caps: tuple[bool, bool]):
-        # slab along the line between a and b (a < b), across [c - ht, c + ht], height [z0, z1]
+    def floors(*points) -> list[float]:
+        # floor_dz of the rooms containing the points (the outside has none)
+        return [room.floor_dz for room in (_room_at(layout.rooms, px, py) for px, py in points) if room is not None]
+
+    def slab(orient: str, c: float, a: float, b: float, z0: float, z1: float, caps: tuple[bool, bool], bottom: float):
+        # slab along the line between a and b (a < b), across [c - ht, c + ht], height [z0, z1];
+        # ``bottom`` is the lowest floor beside it (its underside there is hidden)
         if orient == "h":
             lo, hi = np.array([a, c - ht, z0]), np.array([b, c + ht, z1])
             sides = {"+y": side_mat((a + b) / 2, c + 0.2), "-y": side_mat((a + b) / 2, c - 0.2)}
@@ -210,10 +133,23 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
         for end, cap in zip(ends, caps):
             if cap:
                 mats[end] = pal["trim"]
-        skip = ("+z", "-z") if z0 == 0.0 else ("+z",)
-        if z0 > 0:
+        skip = ("+z", "-z") if z0 == bottom else ("+z",)
+        if z0 > bottom:
             mats["-z"] = pal["trim"]
         add_box(mb, lo, hi, mats, None, skip=skip)
+
+    def step(orient: str, c: float, a: float, b: float, dz_minus: float, dz_plus: float):
+        # a step filling the opening [a, b] below the higher floor, on the lower side's half
+        low_plus = dz_plus < dz_minus
+        across = (c, c + ht) if low_plus else (c - ht, c)
+        z0, z1 = zf + min(dz_minus, dz_plus), zf + max(dz_minus, dz_plus)
+        axis = "y" if orient == "h" else "x"
+        riser = ("+" if low_plus else "-") + axis
+        if orient == "h":
+            lo, hi = np.array([a, across[0], z0]), np.array([b, across[1], z1])
+        else:
+            lo, hi = np.array([across[0], a, z0]), np.array([across[1], b, z1])
+        add_box(mb, lo, hi, {riser: pal["trim"], "+z": pal["trim"]}, None, skip=("-z",))
 
     for (orient, c), intervals in _wall_lines(layout.rooms).items():
         on_line = sorted({(n[0] if orient == "h" else n[1]) for n in nodes if (n[1] if orient == "h" else n[0]) == c})
@@ -221,19 +157,30 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
         for a, b in intervals:
             cuts = [p for p in on_line if a - 1e-9 <= p <= b + 1e-9]
             for p, q in zip(cuts[:-1], cuts[1:]):
-                # piece between two junctions, shortened to leave room for the pillars
+                # piece between two junctions, shortened to leave room for the pillars; it has one
+                # room (or the outside) on each side
+                m = (p + q) / 2
+                minus, plus = ((m, c - 0.2), (m, c + 0.2)) if orient == "h" else ((c - 0.2, m), (c + 0.2, m))
+                dzs = floors(minus, plus)
+                bottom = zf + min(dzs, default=0.0)
                 start, start_cap = p + ht, False
                 for g0, g1, gh in line_gaps:
                     if g0 >= p and g1 <= q:
                         if g0 < start + 1e-6:
                             raise ValueError(f"door opening at {orient}={c} overlaps a wall junction")
-                        slab(orient, c, start, g0, 0.0, H, (start_cap, True))
-                        slab(orient, c, g0, g1, gh, H, (False, False))
+                        slab(orient, c, start, g0, bottom, H, (start_cap, True), bottom)
+                        z_head = zf + max(dzs, default=0.0) + gh
+                        if z_head < H - 1e-9:
+                            slab(orient, c, g0, g1, z_head, H, (False, False), bottom)
+                        (dz_minus,), (dz_plus,) = floors(minus), floors(plus)
+                        if dz_minus != dz_plus:
+                            step(orient, c, g0, g1, dz_minus, dz_plus)
                         start, start_cap = g1, True
                 if q - ht > start + 1e-6:
-                    slab(orient, c, start, q - ht, 0.0, H, (start_cap, False))
+                    slab(orient, c, start, q - ht, bottom, H, (start_cap, False), bottom)
     for x, y in sorted(nodes):
-        lo, hi = np.array([x - ht, y - ht, 0.0]), np.array([x + ht, y + ht, H])
+        bottom = zf + min(floors(*((x + sx, y + sy) for sx in (-0.2, 0.2) for sy in (-0.2, 0.2))), default=0.0)
+        lo, hi = np.array([x - ht, y - ht, bottom]), np.array([x + ht, y + ht, H])
         mats = {f: side_mat(x + 0.2 * n[0], y + 0.2 * n[1]) for f, (n, _) in AXES.items() if f[1] != "z"}
         # a pillar face towards a wall slab is hidden; its room test may hit either side: fine
         add_box(mb, lo, hi, mats, None, skip=("+z", "-z"))
@@ -243,20 +190,49 @@ def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str
 # rooms: floors, ceilings, lights, furniture, pictures
 
 
+def subtract_rects(rect, holes) -> list[tuple[float, float, float, float]]:
+    """Cover of ``rect`` minus ``holes`` by axis-aligned rectangles, all (xmin, ymin, xmax, ymax).
+
+    Each hole cuts every rectangle it overlaps into up to four pieces (the strips below and above
+    it across the full width, then the strips left and right of it).
+    """
+    rects = [tuple(rect)]
+    for hx0, hy0, hx1, hy1 in holes:
+        out = []
+        for x0, y0, x1, y1 in rects:
+            if hx0 >= x1 or hx1 <= x0 or hy0 >= y1 or hy1 <= y0:
+                out.append((x0, y0, x1, y1))
+                continue
+            my0, my1 = max(y0, hy0), min(y1, hy1)
+            pieces = [(x0, y0, x1, my0), (x0, my1, x1, y1), (x0, my0, max(x0, hx0), my1), (min(x1, hx1), my0, x1, my1)]
+            out += [r for r in pieces if r[2] - r[0] > 1e-9 and r[3] - r[1] > 1e-9]
+        rects = out
+    return rects
+
+
+def _overlaps(a, b) -> bool:
+    """True when the open rectangles a and b (xmin, ymin, xmax, ymax) intersect."""
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
 def _build_room_shell(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict) -> None:
     x0, y0, x1, y1 = room.bounds
-    H = layout.ceiling_height
+    zf = layout.floor_z + room.floor_dz
+    H = layout.floor_z + layout.ceiling_height
     tex, rep = FLOORS[room.floor]
     floor = Material(f"floor_{room.floor}", tex, repeat=rep)
-    # floor quad (up) and ceiling quad (down), UVs in room-local metres so twin rooms match
+    # floor quads (up) and ceiling quads (down) around any holes, UVs in room-local metres so twin
+    # rooms match
     w, d = x1 - x0, y1 - y0
-    c_floor = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], dtype=float)
-    uv = np.array([[0, 0], [w, 0], [w, d], [0, d]], dtype=float)
-    mb.quad(floor, c_floor, uv / rep, (0, 0, 1))
-    c_ceil = np.array([[x0, y1, H], [x1, y1, H], [x1, y0, H], [x0, y0, H]], dtype=float)
-    uv_c = np.array([[0, d], [w, d], [w, 0], [0, 0]], dtype=float)
-    mb.quad(pal["ceiling"], c_ceil, uv_c / pal["ceiling"].repeat, (0, 0, -1))
-    # ceiling light panels on a regular grid
+    for a0, b0, a1, b1 in subtract_rects(room.bounds, room.floor_holes):
+        c_floor = np.array([[a0, b0, zf], [a1, b0, zf], [a1, b1, zf], [a0, b1, zf]], dtype=float)
+        uv = np.array([[a0 - x0, b0 - y0], [a1 - x0, b0 - y0], [a1 - x0, b1 - y0], [a0 - x0, b1 - y0]], dtype=float)
+        mb.quad(floor, c_floor, uv / rep, (0, 0, 1))
+    for a0, b0, a1, b1 in subtract_rects(room.bounds, room.ceiling_holes):
+        c_ceil = np.array([[a0, b1, H], [a1, b1, H], [a1, b0, H], [a0, b0, H]], dtype=float)
+        uv_c = np.array([[a0 - x0, b1 - y0], [a1 - x0, b1 - y0], [a1 - x0, b0 - y0], [a0 - x0, b0 - y0]], dtype=float)
+        mb.quad(pal["ceiling"], c_ceil, uv_c / pal["ceiling"].repeat, (0, 0, -1))
+    # ceiling light panels on a regular grid, none over a ceiling hole
     n = room.lights
     if n > 0:
         cols = max(1, int(round(np.sqrt(n * w / d))))
@@ -265,6 +241,8 @@ def _build_room_shell(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict
             for j in range(rows):
                 cx = x0 + (i + 0.5) * w / cols
                 cy = y0 + (j + 0.5) * d / rows
+                if any(_overlaps((cx - 0.3, cy - 0.6, cx + 0.3, cy + 0.6), h) for h in room.ceiling_holes):
+                    continue
                 add_box(mb, (cx - 0.3, cy - 0.6, H - 0.02), (cx + 0.3, cy + 0.6, H - 0.001), pal["light"], None, skip=("+z",))
 
 
@@ -285,13 +263,14 @@ def _build_furniture(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict,
         if item.kind == "chair":  # chairs are never pushed in exactly the same way
             yaw += rng.uniform(-0.35, 0.35)
             jx, jy = rng.uniform(-0.06, 0.06, 2)
-        T = (yaw, np.array([x0 + item.x + jx, y0 + item.y + jy, 0.0]))
+        T = (yaw, np.array([x0 + item.x + jx, y0 + item.y + jy, layout.floor_z + room.floor_dz]))
         fn(mb, pal, T, rng, item.variant)
 
 
 def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, bank: tx.TextureBank) -> None:
     x0, y0, x1, y1 = room.bounds
     ht = layout.wall_thickness / 2
+    zf = layout.floor_z + room.floor_dz
     for pic in room.pictures:
         key = f"pic:{pic.image}"
         if pic.image == "whiteboard":
@@ -309,10 +288,10 @@ def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, 
         # picture in a local frame facing -y, then turned onto the wall
         gap, depth, border = 0.015, 0.025, 0.025
         wall_pos = {
-            "N": (0.0, np.array([x0 + pic.along, y1 - ht, 0.0])),
-            "S": (np.pi, np.array([x0 + pic.along, y0 + ht, 0.0])),
-            "E": (-np.pi / 2, np.array([x1 - ht, y0 + pic.along, 0.0])),
-            "W": (np.pi / 2, np.array([x0 + ht, y0 + pic.along, 0.0])),
+            "N": (0.0, np.array([x0 + pic.along, y1 - ht, zf])),
+            "S": (np.pi, np.array([x0 + pic.along, y0 + ht, zf])),
+            "E": (-np.pi / 2, np.array([x1 - ht, y0 + pic.along, zf])),
+            "W": (np.pi / 2, np.array([x0 + ht, y0 + pic.along, zf])),
         }
         yaw, t = wall_pos[pic.wall]
         z = pic.z_center
@@ -326,7 +305,8 @@ def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, 
 
 
 def validate_layout(layout: Layout) -> None:
-    """Raise ValueError when furniture leaves its room, blocks a door, or is too tall off the walls."""
+    """Raise ValueError when furniture leaves its room, blocks a door, stands over a floor hole,
+    or is too tall off the walls, or when a floor/ceiling hole leaves its room."""
     rooms = {r.name: r for r in layout.rooms}
     for d in layout.doors:
         if d.a not in rooms or d.b not in rooms:
@@ -335,6 +315,9 @@ def validate_layout(layout: Layout) -> None:
     ht = layout.wall_thickness / 2
     for room in layout.rooms:
         x0, y0, x1, y1 = room.bounds
+        for hx0, hy0, hx1, hy1 in room.floor_holes + room.ceiling_holes:
+            if not (x0 <= hx0 < hx1 <= x1 and y0 <= hy0 < hy1 <= y1):
+                raise ValueError(f"{layout.name}/{room.name}: hole {(hx0, hy0, hx1, hy1)} leaves the room")
         for pic in room.pictures:
             orient, line, base = {"N": ("h", y1, x0), "S": ("h", y0, x0), "E": ("v", x1, y0), "W": ("v", x0, y0)}[pic.wall]
             lo, hi = base + pic.along - pic.width / 2 - 0.05, base + pic.along + pic.width / 2 + 0.05
@@ -352,6 +335,8 @@ def validate_layout(layout: Layout) -> None:
             cx, cy = x0 + item.x, y0 + item.y
             if item.kind != "monitor" and (cx - hw < x0 + ht - 1e-6 or cx + hw > x1 - ht + 1e-6 or cy - hd < y0 + ht - 1e-6 or cy + hd > y1 - ht + 1e-6):
                 raise ValueError(f"{layout.name}/{room.name}: {item.kind} at ({item.x}, {item.y}) leaves the room")
+            if any(_overlaps((cx - hw, cy - hd, cx + hw, cy + hd), hole) for hole in room.floor_holes):
+                raise ValueError(f"{layout.name}/{room.name}: {item.kind} at ({item.x}, {item.y}) stands over a floor hole")
             if h > MAX_FREE_HEIGHT and item.kind not in TALL_AGAINST_WALL and item.kind not in ("monitor", "tv_stand"):
                 raise ValueError(f"{layout.name}/{room.name}: {item.kind} is taller than {MAX_FREE_HEIGHT} m")
             if item.kind in TALL_AGAINST_WALL:
@@ -369,17 +354,13 @@ def validate_layout(layout: Layout) -> None:
                         raise ValueError(f"{layout.name}/{room.name}: {item.kind} at ({item.x}, {item.y}) blocks a door")
 
 
-def build_scene(layout: Layout, seed: int = 0) -> Scene:
-    """Build the textured :class:`Scene` of ``layout`` (deterministic in ``seed``).
+def add_layout(mb: MeshBuilder, layout: Layout, pal: dict[str, Material], seed: int) -> None:
+    """Add the walls, floors, ceilings, lights, furniture and pictures of ``layout`` to ``mb``.
 
-    Returns a scene with read-only arrays, ``rooms`` set from the layout, ``floor_z = 0.0`` and
-    ``source = "builtin:<name>"``; ``meta`` holds ``twins`` (pairs of identical rooms) and the
-    ceiling height.
+    Everything is placed at the layout's ``floor_z`` (one storey of a building); wall paint
+    textures are registered in ``mb.texture_fns``. The layout is validated first.
     """
     validate_layout(layout)
-    bank = tx.TextureBank(seed)
-    mb = MeshBuilder(layout.name, bank, texture_fns())
-    pal = palette()
     wall_mats: dict[str, Material] = {}
     for room in layout.rooms:
         key = "wall_" + "_".join(str(c) for c in room.wall_color)
@@ -390,9 +371,26 @@ def build_scene(layout: Layout, seed: int = 0) -> Scene:
     for room in layout.rooms:
         _build_room_shell(mb, layout, room, pal)
         _build_furniture(mb, layout, room, pal, seed)
-        _build_pictures(mb, layout, room, pal, bank)
+        _build_pictures(mb, layout, room, pal, mb.bank)
+
+
+def layout_rooms(layout: Layout) -> tuple[Room, ...]:
+    """The :class:`Room` footprints of ``layout`` with their floor heights (world metres)."""
+    return tuple(Room(r.name, tuple(float(v) for v in r.bounds), floor_z=layout.floor_z + r.floor_dz) for r in layout.rooms)
+
+
+def build_scene(layout: Layout, seed: int = 0) -> Scene:
+    """Build the textured :class:`Scene` of ``layout`` (deterministic in ``seed``).
+
+    Returns a scene with read-only arrays, ``rooms`` set from the layout, ``floor_z`` (the
+    layout's, 0.0 for the built-ins) and ``source = "builtin:<name>"``; ``meta`` holds ``twins``
+    (pairs of identical rooms) and the ceiling height.
+    """
+    bank = tx.TextureBank(seed)
+    mb = MeshBuilder(layout.name, bank, texture_fns())
+    add_layout(mb, layout, palette(), seed)
     parts = mb.parts()
-    rooms = tuple(Room(r.name, tuple(float(v) for v in r.bounds)) for r in layout.rooms)
+    rooms = layout_rooms(layout)
     meta = {"twins": [list(p) for p in layout.twins], "ceiling_height": layout.ceiling_height, "seed": int(seed)}
     log.debug("built %s: %d parts, %d faces, %d textures", layout.name, len(parts), sum(len(p.faces) for p in parts), len(bank))
-    return Scene(name=layout.name, parts=tuple(parts), rooms=rooms, floor_z=0.0, source=f"builtin:{layout.name}", meta=meta)
+    return Scene(name=layout.name, parts=tuple(parts), rooms=rooms, floor_z=float(layout.floor_z), source=f"builtin:{layout.name}", meta=meta)

@@ -1,0 +1,113 @@
+"""Layout description of the procedural interiors: rooms, furniture items, pictures, doors.
+
+World frame: z up, metres. Room bounds are wall centre lines; furniture and pictures are in
+room-local coordinates (metres from the room's (xmin, ymin) corner). A :class:`Layout` is one
+interior or one storey of a building (its ``floor_z``); :mod:`.procedural` turns it into meshes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["Door", "Item", "Layout", "Picture", "RoomSpec"]
+
+
+@dataclass(frozen=True)
+class Item:
+    """A piece of furniture. ``kind`` is a key of :data:`.furniture.FURNITURE`; (x, y) its footprint centre in
+    room-local metres; ``yaw_deg`` its rotation (0: front faces -y); ``variant`` picks colours."""
+
+    kind: str
+    x: float
+    y: float
+    yaw_deg: float = 0.0
+    variant: int = 0
+
+
+@dataclass(frozen=True)
+class Picture:
+    """A framed picture or poster on a room wall.
+
+    Attributes:
+        wall: ``"N"`` (y max), ``"S"`` (y min), ``"E"`` (x max) or ``"W"`` (x min).
+        along: room-local coordinate of the picture centre along the wall (x for N/S, y for E/W).
+        width: picture width in metres (height follows the image aspect ratio).
+        image: a bundled photo name (:data:`textures.BUNDLED_PHOTOS`) or ``"art:<k>"`` for
+            procedural art number k, or ``"whiteboard"``.
+        z_center: height of the picture centre above the room's floor (default 1.5 m, eye level).
+    """
+
+    wall: str
+    along: float
+    width: float
+    image: str
+    z_center: float = 1.5
+
+
+@dataclass(frozen=True)
+class RoomSpec:
+    """A room: footprint (xmin, ymin, xmax, ymax) on wall centre lines, floor and wall finish.
+
+    Attributes:
+        floor: ``"wood"``, ``"tiles"``, ``"carpet"`` or ``"wood_dark"``.
+        wall_color: RGB 0-255 paint colour of its walls (inside faces).
+        items / pictures: contents in room-local coordinates.
+        template: rooms with the same template get identical seeded jitter (twins).
+        lights: number of ceiling light panels (panels over a ceiling hole are left out).
+        floor_dz: height of the room's floor relative to its storey's floor, metres (-0.25: a
+            sunken room one step down). Walls reach down to the lower floor on either side, and
+            an opening between floors of different heights gets a step (see :class:`Door`).
+        floor_holes / ceiling_holes: world (xmin, ymin, xmax, ymax) rectangles cut out of the
+            room's floor / ceiling quad (a stairwell); they must lie inside the room's bounds.
+    """
+
+    name: str
+    bounds: tuple[float, float, float, float]
+    floor: str = "wood"
+    wall_color: tuple[int, int, int] = (232, 228, 218)
+    items: tuple[Item, ...] = ()
+    pictures: tuple[Picture, ...] = ()
+    template: str | None = None
+    lights: int = 2
+    floor_dz: float = 0.0
+    floor_holes: tuple[tuple[float, float, float, float], ...] = ()
+    ceiling_holes: tuple[tuple[float, float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class Door:
+    """An opening (no door leaf, no glass) in the wall shared by rooms ``a`` and ``b``.
+
+    ``at`` is the fraction along the shared wall segment of the opening centre (default 0.5);
+    ``width`` defaults to 0.95 m and ``height`` to 2.1 m (a lintel closes the wall above; a
+    height of at least the ceiling height leaves the opening open to the ceiling). When the two
+    rooms' floors differ (``RoomSpec.floor_dz``), a step fills the opening below the higher floor:
+    a box on the lower room's half of the wall, its riser flush with the lower room's wall faces.
+    """
+
+    a: str
+    b: str
+    at: float = 0.5
+    width: float = 0.95
+    height: float = 2.1
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A whole interior (or one storey of a building): rooms, doors, wall thickness (0.1 m),
+    ceiling height (2.7 m, above ``floor_z``) and ``floor_z``, the height of the storey's floor
+    (world metres; room floors are at ``floor_z + RoomSpec.floor_dz``)."""
+
+    name: str
+    description: str
+    rooms: tuple[RoomSpec, ...]
+    doors: tuple[Door, ...] = ()
+    wall_thickness: float = 0.1
+    ceiling_height: float = 2.7
+    twins: tuple[tuple[str, str], ...] = field(default=())
+    floor_z: float = 0.0
+
+    @property
+    def floor_area(self) -> float:
+        """Sum of room footprints in m^2 (on wall centre lines)."""
+        return float(sum((r.bounds[2] - r.bounds[0]) * (r.bounds[3] - r.bounds[1]) for r in self.rooms))
