@@ -13,8 +13,18 @@ from markerplace.scene import load_scene
 from markerplace.scene.catalogue import build_builtin, builtin_names, get_layout, list_scenes
 from markerplace.scene.textures import BUNDLED_PHOTOS, bundled_photo
 
-AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15)}
+AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15), "house": (120, 170)}
 EYE = 1.5
+
+
+def _storeys(scene) -> list[float]:
+    """Storey floor heights (one for the single-storey built-ins)."""
+    return list(scene.meta.get("storeys", [scene.floor_z]))
+
+
+def _storey_of(scene, room) -> float:
+    """Floor height of the storey a room belongs to (a sunken room belongs to the storey above it)."""
+    return max(z for z in _storeys(scene) if z <= room.floor_z + 0.5)
 
 
 def _slice(scene, z: float):
@@ -83,7 +93,9 @@ def test_scene_structure(builtin):
     assert lo <= area <= hi
     assert scene.floor_z == 0.0 and scene.source == f"builtin:{name}"
     assert scene.num_faces < 20000
-    np.testing.assert_allclose(scene.bounds[:, 2], [0.0, 2.7], atol=1e-6)
+    low = min(r.floor_z for r in scene.rooms)
+    top = max(_storeys(scene)) + scene.meta["ceiling_height"]
+    np.testing.assert_allclose(scene.bounds[:, 2], [low, top], atol=1e-6)
     for p in scene.parts:
         assert p.vertices.dtype == np.float32 and p.vertices.shape[1] == 3
         assert p.faces.dtype == np.int32 and p.faces.min() >= 0 and p.faces.max() < len(p.vertices)
@@ -109,19 +121,22 @@ def test_textures_are_shared_not_duplicated(builtin):
 
 def test_floor_plan_is_connected_at_eye_level(builtin):
     _, scene = builtin
-    labels, lo, cell = _free_space_labels(scene, EYE)
-    centres = [((r.bounds[0] + r.bounds[2]) / 2, (r.bounds[1] + r.bounds[3]) / 2) for r in scene.rooms]
-    ids = {_label_at(labels, lo, cell, c) for c in centres}
-    assert len(ids) == 1 and 0 not in ids
-    assert _label_at(labels, lo, cell, lo + 0.1) not in ids  # the outside does not leak in
+    for storey in _storeys(scene):
+        labels, lo, cell = _free_space_labels(scene, storey + EYE)
+        rooms = [r for r in scene.rooms if _storey_of(scene, r) == storey]
+        centres = [((r.bounds[0] + r.bounds[2]) / 2, (r.bounds[1] + r.bounds[3]) / 2) for r in rooms]
+        ids = {_label_at(labels, lo, cell, c) for c in centres}
+        assert len(ids) == 1 and 0 not in ids, storey
+        assert _label_at(labels, lo, cell, lo + 0.1) not in ids  # the outside does not leak in
 
 
 def test_walls_dominate_eye_level(builtin):
     name, scene = builtin
-    segs, owner = _slice(scene, EYE)
-    is_wall = np.array(["/wall_" in scene.parts[i].name or "/trim" in scene.parts[i].name for i in owner])
+    slices = {z: _slice(scene, z + EYE) for z in _storeys(scene)}
     hits_wall = total = 0
     for room in scene.rooms:
+        segs, owner = slices[_storey_of(scene, room)]
+        is_wall = np.array(["/wall_" in scene.parts[i].name or "/trim" in scene.parts[i].name for i in owner])
         x0, y0, x1, y1 = room.bounds
         origin = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
         for yaw in np.linspace(0, 2 * np.pi, 36, endpoint=False):
@@ -147,8 +162,11 @@ def test_pictures_hang_at_eye_level_off_the_wall(builtin):
     for p in pics:
         for quad in p.vertices.reshape(-1, 4, 3).astype(float):
             c = quad.mean(axis=0)
-            assert 1.3 - 1e-4 <= c[2] <= 1.7 + 1e-4
-            room = next(r for r in scene.rooms if r.bounds[0] < c[0] < r.bounds[2] and r.bounds[1] < c[1] < r.bounds[3])
+            room = next(
+                r for r in scene.rooms
+                if r.bounds[0] < c[0] < r.bounds[2] and r.bounds[1] < c[1] < r.bounds[3] and 0 < c[2] - r.floor_z < 2.5
+            )
+            assert 1.3 - 1e-4 <= c[2] - _storey_of(scene, room) <= 1.7 + 1e-4
             x0, y0, x1, y1 = room.bounds
             gap = min(c[0] - x0, x1 - c[0], c[1] - y0, y1 - c[1]) - 0.05  # from the wall surface
             assert 0.01 <= gap <= 0.08

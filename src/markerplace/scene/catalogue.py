@@ -1,7 +1,8 @@
 """Built-in scenes: layouts of the procedural interiors and a per-process cache of built scenes.
 
 Sizes follow the paper's scenes: office ~110 m^2, studio ~150 m^2, apartment ~300 m^2,
-room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests. Coordinates are metres, world z up; room
+room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests and the two-storey ``house`` (158 m^2,
+:mod:`.house`). Coordinates are metres, world z up; room
 bounds are wall centre lines; furniture and pictures are in room-local coordinates.
 """
 
@@ -10,53 +11,10 @@ from __future__ import annotations
 import functools
 
 from ..errors import UserError
-from .procedural import FURNITURE, Door, Item, Layout, Picture, RoomSpec, build_scene
+from .layout import Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .house import Building, build_house, house_plan
+from .procedural import build_scene
 from .types import Scene
-
-HALF_WALL = 0.05  # half of the default wall thickness
-WALL_GAP = 0.02  # furniture stands this far from the wall surface
-
-
-def wall_item(kind: str, room_size: tuple[float, float], wall: str, along: float, variant: int = 0) -> Item:
-    """An item standing against wall ``N/S/E/W`` of a room of size (width, depth), facing inwards.
-
-    ``along`` is the room-local coordinate of its centre along the wall (x for N/S, y for E/W).
-    """
-    w, d = room_size
-    depth = FURNITURE[kind][2]
-    off = HALF_WALL + WALL_GAP + depth / 2
-    if wall == "N":
-        return Item(kind, along, d - off, 0.0, variant)
-    if wall == "S":
-        return Item(kind, along, off, 180.0, variant)
-    if wall == "E":
-        return Item(kind, w - off, along, -90.0, variant)
-    if wall == "W":
-        return Item(kind, off, along, 90.0, variant)
-    raise ValueError(f"wall must be N, S, E or W, not {wall!r}")
-
-
-def workstation(x: float, y: float, yaw_deg: float) -> tuple[Item, ...]:
-    """Desk + monitor + chair; desk centre (x, y) room-local, the user sits on the desk's front side."""
-    import numpy as np
-
-    a = np.radians(yaw_deg)
-    dx, dy = 0.65 * np.sin(a), -0.65 * np.cos(a)  # chair in front of the desk
-    return (
-        Item("desk", x, y, yaw_deg),
-        Item("monitor", x, y, yaw_deg),
-        Item("chair", round(x + dx, 4), round(y + dy, 4), yaw_deg + 180.0),
-    )
-
-
-def _chairs_around(x: float, y: float, half_depth: float, xs: tuple[float, ...]) -> tuple[Item, ...]:
-    """Chairs on both long sides of a table centred at (x, y), facing it."""
-    out = []
-    for cx in xs:
-        out.append(Item("chair", x + cx, y - half_depth - 0.3, 180.0))
-        out.append(Item("chair", x + cx, y + half_depth + 0.3, 0.0))
-    return tuple(out)
-
 
 # ----------------------------------------------------------------------------------------------
 
@@ -133,7 +91,7 @@ def _office() -> Layout:
         wall_color=(226, 231, 236),
         items=(
             Item("big_table", 2.6, 2.25),
-            *_chairs_around(2.6, 2.25, 0.55, (-0.7, 0.0, 0.7)),
+            *chairs_around(2.6, 2.25, 0.55, (-0.7, 0.0, 0.7)),
             wall_item("tv_stand", meet_size, "E", 2.25),
         ),
         pictures=(Picture("S", 2.5, 1.0, "hubble"),),
@@ -149,7 +107,7 @@ def _office() -> Layout:
             wall_item("counter", kit_size, "N", 2.6),
             wall_item("fridge", kit_size, "N", 4.3),
             Item("table", 2.9, 1.5),
-            *_chairs_around(2.9, 1.5, 0.45, (-0.4, 0.4)),
+            *chairs_around(2.9, 1.5, 0.45, (-0.4, 0.4)),
         ),
         pictures=(Picture("E", 1.5, 0.6, "coffee"),),
         lights=1,
@@ -177,7 +135,7 @@ def _studio() -> Layout:
             wall_item("counter", loft_size, "N", 9.0),
             wall_item("fridge", loft_size, "N", 10.8),
             Item("table", 8.8, 6.6),
-            *_chairs_around(8.8, 6.6, 0.45, (-0.4, 0.4)),
+            *chairs_around(8.8, 6.6, 0.45, (-0.4, 0.4)),
             wall_item("bed", loft_size, "N", 2.2),
             wall_item("nightstand", loft_size, "N", 0.9),
             wall_item("nightstand", loft_size, "N", 3.5),
@@ -279,7 +237,7 @@ def _apartment() -> Layout:
             wall_item("counter", kitchen_size, "S", 1.9),
             wall_item("fridge", kitchen_size, "S", 3.45),
             Item("table", 1.9, 4.3),
-            *_chairs_around(1.9, 4.3, 0.45, (-0.4, 0.4)),
+            *chairs_around(1.9, 4.3, 0.45, (-0.4, 0.4)),
         ),
         pictures=(Picture("E", 2.5, 0.6, "coffee"),),
         lights=2,
@@ -387,7 +345,9 @@ def _apartment() -> Layout:
     )
 
 
-_LAYOUTS = {"office": _office, "studio": _studio, "apartment": _apartment, "room": _room, "tiny": _tiny}
+_LAYOUTS = {"office": _office, "studio": _studio, "apartment": _apartment, "room": _room, "tiny": _tiny, "house": house_plan}
+# multi-storey built-ins: their own builders (single-storey ones use procedural.build_scene)
+_BUILDERS = {"house": build_house}
 
 
 def builtin_names() -> list[str]:
@@ -396,8 +356,10 @@ def builtin_names() -> list[str]:
 
 
 @functools.lru_cache(maxsize=None)
-def get_layout(name: str) -> Layout:
-    """The :class:`Layout` of a built-in scene (raises UserError for an unknown name)."""
+def get_layout(name: str) -> Layout | Building:
+    """The :class:`Layout` of a built-in scene, or the :class:`~.house.Building` (one layout per
+    storey) of a multi-storey one; both have ``rooms``, ``floor_area`` and ``description``.
+    Raises UserError for an unknown name."""
     if name not in _LAYOUTS:
         raise UserError(f"unknown built-in scene {name!r}; choose one of {', '.join(_LAYOUTS)}")
     return _LAYOUTS[name]()
@@ -405,7 +367,10 @@ def get_layout(name: str) -> Layout:
 
 def build_builtin(name: str, seed: int = 0) -> Scene:
     """Build a built-in scene afresh (uncached); deterministic in ``seed``."""
-    return build_scene(get_layout(name), seed)
+    plan = get_layout(name)
+    if name in _BUILDERS:
+        return _BUILDERS[name](seed)
+    return build_scene(plan, seed)
 
 
 @functools.lru_cache(maxsize=16)

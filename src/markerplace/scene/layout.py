@@ -9,7 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["Door", "Item", "Layout", "Picture", "RoomSpec"]
+import numpy as np
+
+from .furniture import FURNITURE
+
+__all__ = ["Door", "Item", "Layout", "Picture", "RoomSpec", "chairs_around", "wall_item", "workstation"]
 
 
 @dataclass(frozen=True)
@@ -111,3 +115,50 @@ class Layout:
     def floor_area(self) -> float:
         """Sum of room footprints in m^2 (on wall centre lines)."""
         return float(sum((r.bounds[2] - r.bounds[0]) * (r.bounds[3] - r.bounds[1]) for r in self.rooms))
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers for writing layouts
+
+
+HALF_WALL = 0.05  # half of the default wall thickness
+WALL_GAP = 0.02  # furniture stands this far from the wall surface
+
+
+def wall_item(kind: str, room_size: tuple[float, float], wall: str, along: float, variant: int = 0) -> Item:
+    """An item standing against wall ``N/S/E/W`` of a room of size (width, depth), facing inwards.
+
+    ``along`` is the room-local coordinate of its centre along the wall (x for N/S, y for E/W).
+    """
+    w, d = room_size
+    depth = FURNITURE[kind][2]
+    off = HALF_WALL + WALL_GAP + depth / 2
+    if wall == "N":
+        return Item(kind, along, d - off, 0.0, variant)
+    if wall == "S":
+        return Item(kind, along, off, 180.0, variant)
+    if wall == "E":
+        return Item(kind, w - off, along, -90.0, variant)
+    if wall == "W":
+        return Item(kind, off, along, 90.0, variant)
+    raise ValueError(f"wall must be N, S, E or W, not {wall!r}")
+
+
+def workstation(x: float, y: float, yaw_deg: float) -> tuple[Item, ...]:
+    """Desk + monitor + chair; desk centre (x, y) room-local, the user sits on the desk's front side."""
+    a = np.radians(yaw_deg)
+    dx, dy = 0.65 * np.sin(a), -0.65 * np.cos(a)  # chair in front of the desk
+    return (
+        Item("desk", x, y, yaw_deg),
+        Item("monitor", x, y, yaw_deg),
+        Item("chair", round(x + dx, 4), round(y + dy, 4), yaw_deg + 180.0),
+    )
+
+
+def chairs_around(x: float, y: float, half_depth: float, xs: tuple[float, ...]) -> tuple[Item, ...]:
+    """Chairs on both long sides of a table centred at (x, y), facing it."""
+    out = []
+    for cx in xs:
+        out.append(Item("chair", x + cx, y - half_depth - 0.3, 180.0))
+        out.append(Item("chair", x + cx, y + half_depth + 0.3, 0.0))
+    return tuple(out)

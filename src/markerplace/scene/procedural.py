@@ -29,7 +29,8 @@ from .types import Room, Scene
 
 __all__ = [
     "FURNITURE", "Door", "Item", "Layout", "Material", "MeshBuilder", "Picture", "RoomSpec",
-    "add_box", "add_layout", "build_scene", "layout_rooms", "subtract_rects", "validate_layout",
+    "add_box", "add_layout", "build_scene", "door_span", "layout_rooms", "subtract_rects", "validate_layout",
+    "wall_material",
 ]
 
 log = logging.getLogger(__name__)
@@ -65,27 +66,38 @@ def _wall_lines(rooms: tuple[RoomSpec, ...]):
     return merged
 
 
+def door_span(layout: Layout, door: Door) -> tuple[str, float, float, float]:
+    """Where ``door`` opens: (orient, line, start, end).
+
+    ``orient`` is ``"h"`` for a wall along x at y = ``line`` or ``"v"`` for a wall along y at
+    x = ``line`` (world metres, ``line`` rounded to 0.1 mm); the opening spans [start, end] along
+    the wall. Raises ValueError when the rooms share no wall long enough for the opening.
+    """
+    rooms = {r.name: r for r in layout.rooms}
+    a, b = rooms[door.a].bounds, rooms[door.b].bounds
+    if abs(a[2] - b[0]) < 1e-6 or abs(b[2] - a[0]) < 1e-6:
+        x = a[2] if abs(a[2] - b[0]) < 1e-6 else a[0]
+        lo, hi = max(a[1], b[1]), min(a[3], b[3])
+        key = ("v", _r(x))
+    elif abs(a[3] - b[1]) < 1e-6 or abs(b[3] - a[1]) < 1e-6:
+        y = a[3] if abs(a[3] - b[1]) < 1e-6 else a[1]
+        lo, hi = max(a[0], b[0]), min(a[2], b[2])
+        key = ("h", _r(y))
+    else:
+        raise ValueError(f"door {door.a}-{door.b}: the rooms do not share a wall")
+    margin = door.width / 2 + layout.wall_thickness
+    if hi - lo < 2 * margin:
+        raise ValueError(f"door {door.a}-{door.b}: shared wall too short for a {door.width} m opening")
+    c = np.clip(lo + door.at * (hi - lo), lo + margin, hi - margin)
+    return key[0], key[1], float(c - door.width / 2), float(c + door.width / 2)
+
+
 def _door_gaps(layout: Layout) -> dict[tuple[str, float], list[tuple[float, float, float]]]:
     """Door openings per wall line: (start, end, height) along the line."""
-    rooms = {r.name: r for r in layout.rooms}
     gaps: dict[tuple[str, float], list[tuple[float, float, float]]] = {}
     for d in layout.doors:
-        a, b = rooms[d.a].bounds, rooms[d.b].bounds
-        if abs(a[2] - b[0]) < 1e-6 or abs(b[2] - a[0]) < 1e-6:
-            x = a[2] if abs(a[2] - b[0]) < 1e-6 else a[0]
-            lo, hi = max(a[1], b[1]), min(a[3], b[3])
-            key = ("v", _r(x))
-        elif abs(a[3] - b[1]) < 1e-6 or abs(b[3] - a[1]) < 1e-6:
-            y = a[3] if abs(a[3] - b[1]) < 1e-6 else a[1]
-            lo, hi = max(a[0], b[0]), min(a[2], b[2])
-            key = ("h", _r(y))
-        else:
-            raise ValueError(f"door {d.a}-{d.b}: the rooms do not share a wall")
-        margin = d.width / 2 + layout.wall_thickness
-        if hi - lo < 2 * margin:
-            raise ValueError(f"door {d.a}-{d.b}: shared wall too short for a {d.width} m opening")
-        c = np.clip(lo + d.at * (hi - lo), lo + margin, hi - margin)
-        gaps.setdefault(key, []).append((c - d.width / 2, c + d.width / 2, d.height))
+        orient, line, g0, g1 = door_span(layout, d)
+        gaps.setdefault((orient, line), []).append((g0, g1, d.height))
     return gaps
 
 
@@ -354,6 +366,14 @@ def validate_layout(layout: Layout) -> None:
                         raise ValueError(f"{layout.name}/{room.name}: {item.kind} at ({item.x}, {item.y}) blocks a door")
 
 
+def wall_material(mb: MeshBuilder, color: tuple[int, int, int]) -> Material:
+    """The painted-wall material of RGB 0-255 ``color`` (its texture registered in ``mb``)."""
+    key = "wall_" + "_".join(str(c) for c in color)
+    tex_key = f"paint_{key}"
+    mb.texture_fns.setdefault(tex_key, (tx.painted_wall, (color,)))
+    return Material(key, tex_key, repeat=2.0)
+
+
 def add_layout(mb: MeshBuilder, layout: Layout, pal: dict[str, Material], seed: int) -> None:
     """Add the walls, floors, ceilings, lights, furniture and pictures of ``layout`` to ``mb``.
 
@@ -361,12 +381,7 @@ def add_layout(mb: MeshBuilder, layout: Layout, pal: dict[str, Material], seed: 
     textures are registered in ``mb.texture_fns``. The layout is validated first.
     """
     validate_layout(layout)
-    wall_mats: dict[str, Material] = {}
-    for room in layout.rooms:
-        key = "wall_" + "_".join(str(c) for c in room.wall_color)
-        tex_key = f"paint_{key}"
-        mb.texture_fns.setdefault(tex_key, (tx.painted_wall, (room.wall_color,)))
-        wall_mats[room.name] = Material(key, tex_key, repeat=2.0)
+    wall_mats = {room.name: wall_material(mb, room.wall_color) for room in layout.rooms}
     _build_walls(mb, layout, pal, wall_mats)
     for room in layout.rooms:
         _build_room_shell(mb, layout, room, pal)
