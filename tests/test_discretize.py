@@ -87,13 +87,14 @@ def dist_to_rects(xy: np.ndarray, rects=RECTS) -> np.ndarray:
 def test_flood_reaches_both_rooms_through_the_door(disc):
     x = disc.locations[:, 0]
     assert (x < 5).sum() > 20 and (x > 5).sum() > 20
-    # free space seen in room b, the start being in the larger room a
-    assert disc.start[0] < 5
-    occ = disc.occupancy
+    # free space in both rooms; the automatic start is in open floor
+    occ = disc.occupancy_of(0)
+    assert disc.occupancy.shape[0] == 1 and list(disc.planned_storeys) == [0]
     r = int((2.0 - disc.grid_origin[1]) / disc.grid_resolution)
     c = int((7.0 - disc.grid_origin[0]) / disc.grid_resolution)
     assert occ[r, c] == 0
     assert set(np.unique(occ)) <= {-1, 0, 1}
+    assert not inside_any(disc.start) and dist_to_rects(disc.start[None])[0] > 0.5
 
 
 def test_locations_keep_clearance_and_stay_inside(disc):
@@ -123,8 +124,8 @@ def test_poses(disc):
     assert np.allclose(disc.world_from_cam[:, :3, 3], np.column_stack([disc.locations[disc.location_index], np.full(N, 1.5)]))
     for i in (0, 3, N - 1):
         assert np.isclose(geometry.yaw_of(disc.world_from_cam[i]), np.arctan2(np.sin(disc.yaw[i]), np.cos(disc.yaw[i])))
-    assert disc.location_z == pytest.approx(1.5)
-    assert disc.floor_z == pytest.approx(0.0)
+    assert np.all(disc.location_z == 1.5)
+    assert disc.floor_z == 0.0 and np.all(disc.location_storey == 0)
     assert list(disc.storeys) == pytest.approx([0.0])
 
 
@@ -185,16 +186,15 @@ def test_save_load_roundtrip(disc, tmp_path):
     d2 = load(path)
     for k in ("locations", "world_from_cam", "candidate_world_from_marker", "occupancy", "perimeter_arclength", "storeys"):
         assert np.array_equal(getattr(d2, k), getattr(disc, k))
-    assert d2.location_z == disc.location_z and d2.perimeter_length == disc.perimeter_length
+    assert np.array_equal(d2.location_z, disc.location_z) and d2.perimeter_length == disc.perimeter_length
+    assert d2.summary == disc.summary
     assert np.array_equal(d2.origin, disc.grid_origin) and d2.resolution == disc.grid_resolution
 
 
-def test_deterministic_and_automatic_start_without_rooms(disc):
+def test_deterministic_and_start_independent(disc):
     d2 = discretize(two_room_scene(rooms=False), DiscretizeConfig())
     assert np.array_equal(d2.locations, disc.locations)
-    assert len(d2.candidate_position) >= 15  # hits come from other scan origins: not identical
-    d2b = discretize(two_room_scene(rooms=False), DiscretizeConfig())
-    assert np.array_equal(d2b.candidate_position, d2.candidate_position)  # deterministic
+    assert np.array_equal(d2.candidate_position, disc.candidate_position)  # deterministic
     d3 = discretize(two_room_scene(), DiscretizeConfig(start=(7.0, 1.0)))
     assert np.array_equal(d3.locations, disc.locations)  # same free space from the other room
 
@@ -204,17 +204,23 @@ def test_two_storeys():
     sc = Scene("two_storeys", tuple(parts))
     d1 = discretize(sc, DiscretizeConfig(level=1))
     assert list(d1.storeys) == pytest.approx([0.0, 3.0])
-    assert d1.location_z == pytest.approx(4.5)
+    assert np.all(d1.location_z == 4.5) and np.all(d1.location_storey == 1)
     assert np.allclose(d1.candidate_position[:, 2], 4.5)
     with pytest.raises(UserError, match="found 2 storey"):
         discretize(sc, DiscretizeConfig(level=2))
+    both = discretize(sc, DiscretizeConfig(level=None))
+    assert list(both.planned_storeys) == [0, 1] and both.occupancy.shape[0] == 2
+    for s, z in ((0, 1.5), (1, 4.5)):
+        on = both.location_storey == s
+        assert on.sum() == len(d1.locations) and np.all(both.location_z[on] == z)
+        assert np.allclose(both.candidate_position[both.candidate_storey == s, 2], z)
 
 
 @pytest.mark.parametrize("kw, message", [
     (dict(start=(5.0, 0.5)), r"--start 5,0.5 is inside an obstacle .*pick a point in open floor space"),
     (dict(start=(8.0, 3.7)), r"inside an obstacle"),
     (dict(start=(20.0, 20.0)), r"--start 20,20 is outside the model"),
-    (dict(level=1), r"--level 1 is out of range: found 1 storey"),
+    (dict(level=1), r"--level 1 is out of range: found 1 storey.*or --level all"),
     (dict(height=3.0), r"no walls cut the plane at z=3.00 m; check --height/--level/--up"),
     (dict(clearance=2.5), r"no feasible camera poses"),
     (dict(tag_size=6.0), r"no candidate marker poses"),

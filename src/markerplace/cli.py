@@ -91,6 +91,19 @@ def _parse_xy(text: str | None):
         raise UserError(f"--start {text!r} must be X,Y (two comma-separated numbers, metres)") from None
 
 
+def _parse_level(text: str):
+    """``--level``: ``all`` (None) or a storey index >= 0."""
+    if str(text).strip().lower() == "all":
+        return None
+    try:
+        level = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 or 'all'") from None
+    if level < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 (0 = lowest) or 'all'")
+    return level
+
+
 def plan_config_from_args(args: argparse.Namespace):
     """Build a :class:`~markerplace.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
     from dataclasses import replace
@@ -136,7 +149,8 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
     g = p.add_argument_group("discretization")
     g.add_argument("--height", type=float, default=1.5, help="eye-level plane height above the floor, metres (default 1.5)")
-    g.add_argument("--level", type=int, default=0, help="storey of a multi-storey model, 0 = lowest (default 0)")
+    g.add_argument("--level", type=_parse_level, default=None, metavar="N|all",
+                   help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget (default all)")
     g.add_argument("--start", default=None, help="X,Y start point of the free-space scan (default: automatic)")
     g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
     g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")

@@ -127,31 +127,45 @@ def sampling_probabilities(scores: np.ndarray, mode: str) -> np.ndarray:
 
 
 def free_space_checker(occupancy: np.ndarray, origin: Sequence[float], resolution: float,
-                       min_clearance: float) -> Callable[[np.ndarray], np.ndarray]:
-    """A function (M, 2) world xy (metres) -> (M,) bool: "free with enough clearance".
+                       min_clearance: float, layer_of_pose: np.ndarray | None = None
+                       ) -> Callable[..., np.ndarray]:
+    """A function ``check(xy (M, 2), source_index (M,) = None) -> (M,) bool``: "free with enough
+    clearance" at world xy (metres), on the storey of the feasible pose each point was drawn from.
 
     Args:
-        occupancy: (H, W) grid, 0 free, 1 occupied, -1 unknown; row 0 at ``origin`` y, column 0
-            at ``origin`` x (the discretization's grid).
+        occupancy: (H, W) grid, or (S, H, W) one per storey; 0 free, 1 occupied, -1 unknown;
+            row 0 at ``origin`` y, column 0 at ``origin`` x (the discretization's grids).
         origin: (x0, y0) world metres of the grid's lower-left corner.
         resolution: cell size, metres.
         min_clearance: required distance (metres) from the cell centre to the nearest
             non-free (occupied or unknown) cell centre.
+        layer_of_pose: (N,) occupancy layer of each feasible pose (needed when S > 1).
     """
     from scipy.ndimage import distance_transform_edt
 
-    free = np.asarray(occupancy) == 0
-    clearance = distance_transform_edt(free) * float(resolution)  # 0 on non-free cells
+    occ = np.asarray(occupancy)
+    if occ.ndim == 2:
+        occ = occ[None]
+    free = occ == 0
+    clearance = np.stack([distance_transform_edt(f) * float(resolution) for f in free])  # 0 on non-free cells
     x0, y0 = float(origin[0]), float(origin[1])
-    H, W = free.shape
+    S, H, W = free.shape
+    layers = None if layer_of_pose is None else np.asarray(layer_of_pose, dtype=np.int64)
 
-    def check(xy: np.ndarray) -> np.ndarray:
+    def check(xy: np.ndarray, source_index: np.ndarray | None = None) -> np.ndarray:
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        if S == 1:
+            layer = np.zeros(len(xy), np.int64)
+        elif layers is None or source_index is None:
+            raise ValueError("several storeys: give layer_of_pose and the source pose of each point")
+        else:
+            layer = layers[np.asarray(source_index, dtype=np.int64)]
         col = np.floor((xy[:, 0] - x0) / resolution).astype(int)
         row = np.floor((xy[:, 1] - y0) / resolution).astype(int)
         inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)
         ok = np.zeros(len(xy), dtype=bool)
-        ok[inside] = free[row[inside], col[inside]] & (clearance[row[inside], col[inside]] > min_clearance)
+        li, ri, ci = layer[inside], row[inside], col[inside]
+        ok[inside] = free[li, ri, ci] & (clearance[li, ri, ci] > min_clearance)
         return ok
 
     return check
@@ -166,7 +180,7 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
         scores: (N,) localizability score of each pose without markers (used by ``weighted``).
         grid_spacing: camera grid spacing, metres (scale of the xy perturbation).
         config: number, mode, perturbation and seed.
-        is_free: (M, 2) world xy -> (M,) bool, e.g. from :func:`free_space_checker`.
+        is_free: ``(xy (M, 2), source_index (M,)) -> (M,) bool``, e.g. from :func:`free_space_checker`.
 
     Returns:
         :class:`TestPoses` with exactly ``config.num`` poses, in draw order.
@@ -186,7 +200,7 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
         idx = rng.choice(len(world_from_cam), size=batch, p=probs)
         dxy = rng.uniform(-0.5, 0.5, size=(batch, 2)) * config.xy_jitter * grid_spacing
         dyaw = np.radians(rng.uniform(-0.5, 0.5, size=batch) * config.yaw_jitter_deg)
-        ok = is_free(world_from_cam[idx, :2, 3] + dxy)
+        ok = is_free(world_from_cam[idx, :2, 3] + dxy, idx)
         take = np.flatnonzero(ok)[:need]
         kept_idx.append(idx[take])
         kept_dxy.append(dxy[take])
@@ -317,22 +331,13 @@ class EvaluateConfig:
 
 def validate_evaluate_config(config: EvaluateConfig) -> None:
     """Raise :class:`UserError` (one line) for settings that cannot work."""
-    if config.tests < 1:
-        raise UserError(f"--tests {config.tests} must be at least 1")
+    from .validation import check_evaluate_config
+
     if not config.test_sets or any(t not in TEST_SETS for t in config.test_sets):
         raise UserError(f"--test-sets {','.join(config.test_sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")
     if any(m not in METHODS for m in config.methods):
         raise UserError(f"--methods {','.join(config.methods)!r} is not valid: use a comma list of {', '.join(METHODS)}")
-    if config.runs < 1:
-        raise UserError(f"--runs {config.runs} must be at least 1")
-    if not config.ks or any(k < 1 for k in config.ks):
-        raise UserError(f"--k {','.join(map(str, config.ks))!r} must list positive marker counts, e.g. 5,10,15,20")
-    if not 0.1 <= config.tag_scale <= 5.0:
-        raise UserError(f"--tag-scale {config.tag_scale} is out of range: give a factor in [0.1, 5], e.g. 1.25")
-    if not 0.0 <= config.shift <= 5.0:
-        raise UserError(f"--shift {config.shift} m is out of range: give a distance in [0, 5] metres")
-    if config.vlad_clusters < 2:
-        raise UserError(f"VLAD clusters {config.vlad_clusters} must be at least 2")
+    check_evaluate_config(config)  # numbers: finite and in range (markerplace.validation)
 
 
 @dataclass(frozen=True, eq=False)

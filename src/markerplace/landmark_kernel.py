@@ -17,6 +17,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+# Open3D ships an older libtbb than numba's TBB layer accepts; asking for OpenMP first avoids
+# numba's attempt (and its warning). Numba falls back to its own workqueue if OpenMP is absent.
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+
 
 @numba.njit(parallel=True, cache=True, fastmath={'reassoc', 'contract', 'nsz', 'arcp'}, boundscheck=False)
 def landmark_information_sums(R: np.ndarray, c_off: np.ndarray, pts: np.ndarray,

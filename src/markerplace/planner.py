@@ -173,7 +173,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     scene = scene_spec.load()
 
     t0 = time.perf_counter()
-    disc_key = cache.hash_of("discretize-v1", cache.scene_hash(scene), config.discretize)
+    disc_key = cache.hash_of("discretize-v2", cache.scene_hash(scene), config.discretize)
     disc_path = run_dir / "discretization.npz"
     disc = cache.load_fresh(disc_path, disc_key, load_discretization)
     if disc is not None:
@@ -230,6 +230,17 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
                                  n_similar, config.noise)
     base_score = -entropy(base_info)
     visible = in_view & obs.candidate_unoccluded
+    # a tag that no camera pose sees helps nobody: never offer it to any method
+    seen = visible[:, :C].any(axis=0)
+    if not seen.all():
+        log.info("plan: %d of %d candidates are seen by no camera pose (hidden behind furniture, beyond every "
+                 "view or on walls no camera faces); removed", int((~seen).sum()), C)
+        keep = np.r_[seen, np.ones(len(existing_T), bool)]
+        disc = disc.with_candidates(seen)
+        all_T, sizes, visible = all_T[keep], [v for v, k in zip(sizes, keep) if k], visible[:, keep]
+        C = int(seen.sum())
+    removed = {**disc.summary.get("candidates_removed", {}), "not seen": int((~seen).sum())}
+    disc = replace(disc, summary={**disc.summary, "candidates_removed": removed})
     coverages = build_coverages(disc.world_from_cam, all_T, sizes, visible, config)
     timings["score"] = time.perf_counter() - t0
     return PlanData(disc, base_info, base_score, coverages, C, timings)

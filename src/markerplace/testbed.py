@@ -546,7 +546,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
              ", ".join(sorted({p.method for p in placements})))
 
     t0 = time.perf_counter()
-    is_free = ev.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.min_clearance)
+    layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
+    is_free = ev.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.min_clearance,
+                                    np.array([layer[int(st)] for st in disc.pose_storey], dtype=np.int64))
     test_poses = {}
     base_key = cache.hash_of("testbed-v1", cache.scene_hash(scene), map_poses)
     for ts in config.test_sets:  # a test set's seed does not depend on which other sets run

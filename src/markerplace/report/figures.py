@@ -51,37 +51,78 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
               locations: np.ndarray, values: np.ndarray, title: str, colorbar_label: str,
               cmap: str = "gray", markers_xy: np.ndarray | None = None,
               markers_normal: np.ndarray | None = None, marker_labels: Sequence[str] | None = None,
-              candidates_xy: np.ndarray | None = None) -> None:
-    """Write one top-down map as PNG.
+              candidates_xy: np.ndarray | None = None, panel_titles: Sequence[str] | None = None,
+              location_panel: np.ndarray | None = None, marker_panel: np.ndarray | None = None,
+              candidate_panel: np.ndarray | None = None) -> None:
+    """Write a top-down map as PNG, one panel per storey.
 
     Args:
         path: output PNG.
-        occupancy: (H, W) int8 grid (-1 unknown, 0 free, 1 occupied), row 0 at ``origin`` y.
+        occupancy: (H, W) or (S, H, W) int8 grid per panel (-1 unknown, 0 free, 1 occupied),
+            row 0 at ``origin`` y.
         origin: (x0, y0) world metres of the grid's lower-left corner.
         resolution: grid cell size, metres.
         locations: (L, 2) camera locations, world xy metres.
         values: (L,) value per location (e.g. mean localizability score); with the default
-            grey colour map dark means low.
+            grey colour map dark means low. One colour scale for all panels.
         title / colorbar_label: text.
         markers_xy / markers_normal: (M, 2) arrow positions and directions; marker_labels (M,).
         candidates_xy: (C, 2) optional candidate marker positions drawn as small ticks.
+        panel_titles: (S,) one title per panel (e.g. "storey 1, floor 3.00 m").
+        location_panel / marker_panel / candidate_panel: panel index of each location, marker
+            and candidate (default: all on panel 0).
     """
-    fig, ax = plt.subplots(figsize=(8, 6.5), dpi=110)
-    _background(ax, occupancy, origin, resolution)
-    sc = ax.scatter(locations[:, 0], locations[:, 1], c=values, cmap=cmap, s=22, edgecolors="0.5", linewidths=0.3, zorder=3)
-    fig.colorbar(sc, ax=ax, shrink=0.8, label=colorbar_label)
-    if candidates_xy is not None and len(candidates_xy):
-        ax.scatter(candidates_xy[:, 0], candidates_xy[:, 1], marker="|", s=12, c="tab:blue", alpha=0.6, zorder=4)
-    if markers_xy is not None:
-        _arrows(ax, np.asarray(markers_xy), np.asarray(markers_normal), marker_labels)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title)
-    fig.tight_layout()
+    occ = np.asarray(occupancy)
+    if occ.ndim == 2:
+        occ = occ[None]
+    S = len(occ)
+
+    def panel_of(idx, n):
+        return np.zeros(n, int) if idx is None else np.asarray(idx, int)
+
+    loc_p = panel_of(location_panel, len(locations))
+    cols = min(S, 2)
+    rows = int(np.ceil(S / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(8 * cols, 6.5 * rows), dpi=110, squeeze=False)
+    vmin, vmax = (float(np.min(values)), float(np.max(values))) if len(values) else (0.0, 1.0)
+    sc = None
+    for k in range(rows * cols):
+        ax = axes.flat[k]
+        if k >= S:
+            ax.axis("off")
+            continue
+        _background(ax, occ[k], origin, resolution)
+        on = loc_p == k
+        sc = ax.scatter(locations[on, 0], locations[on, 1], c=np.asarray(values)[on], cmap=cmap, vmin=vmin, vmax=vmax,
+                        s=22, edgecolors="0.5", linewidths=0.3, zorder=3)
+        if candidates_xy is not None and len(candidates_xy):
+            cp = panel_of(candidate_panel, len(candidates_xy)) == k
+            ax.scatter(candidates_xy[cp, 0], candidates_xy[cp, 1], marker="|", s=12, c="tab:blue", alpha=0.6, zorder=4)
+        if markers_xy is not None and len(markers_xy):
+            mp = panel_of(marker_panel, len(markers_xy)) == k
+            labels = None if marker_labels is None else [lab for lab, m in zip(marker_labels, mp) if m]
+            _arrows(ax, np.asarray(markers_xy)[mp], np.asarray(markers_normal)[mp], labels)
+        _crop(ax, occ[k], origin, resolution)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(title if S == 1 else (panel_titles[k] if panel_titles else f"storey {k}"))
+    if S > 1:
+        fig.suptitle(title)
+    fig.colorbar(sc, ax=list(axes.flat), shrink=0.8, label=colorbar_label)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
+
+
+def _crop(ax, occupancy: np.ndarray, origin: Sequence[float], resolution: float, margin: float = 1.0) -> None:
+    """Zoom a panel onto its storey's free and occupied cells."""
+    rr, cc = np.nonzero(occupancy >= 0)
+    if len(rr) == 0:
+        return
+    x0, y0 = origin
+    ax.set_xlim(x0 + cc.min() * resolution - margin, x0 + (cc.max() + 1) * resolution + margin)
+    ax.set_ylim(y0 + rr.min() * resolution - margin, y0 + (rr.max() + 1) * resolution + margin)
 
 
 def recall_vs_k(path: str | Path, ks: Sequence[int], curves: dict[str, tuple[np.ndarray, np.ndarray | None]],

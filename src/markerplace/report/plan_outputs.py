@@ -77,6 +77,9 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "mean_score_after": float(score_after.mean()),
         "p10_score_before": float(np.percentile(data.base_score, 10)),
         "p10_score_after": float(np.percentile(score_after, 10)),
+        "storeys": [float(z) for z in disc.storeys],
+        "planned_storeys": [int(s) for s in disc.planned_storeys],
+        "discretization": disc.summary,
     }
     write_placement(out_dir, placement, method, scene_source, {"summary": summary})
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
@@ -84,22 +87,33 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
     write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config)})
 
-    grid = dict(occupancy=disc.occupancy, origin=disc.grid_origin, resolution=disc.grid_resolution, locations=disc.locations)
+    slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
+    eye = disc.storeys[disc.planned_storeys] + config.discretize.height
+
+    def panel(z: np.ndarray) -> np.ndarray:
+        """Panel (planned storey) of points at heights z: the nearest eye-level plane."""
+        z = np.asarray(z, float).reshape(-1)
+        return np.argmin(np.abs(z[:, None] - eye[None]), axis=1) if len(z) else np.zeros(0, int)
+
+    grid = dict(occupancy=disc.occupancy, origin=disc.grid_origin, resolution=disc.grid_resolution,
+                locations=disc.locations, location_panel=np.array([slots[int(s)] for s in disc.location_storey]),
+                panel_titles=[f"storey {s}: floor {disc.storeys[s]:.2f} m" for s in disc.planned_storeys])
     floor_map(out_dir / "scores.png", **grid, values=loc_before, cmap="gray",
               title="Localizability score, no markers (dark = low)", colorbar_label="mean score -H over yaws",
-              candidates_xy=disc.candidate_position[:, :2])
+              candidates_xy=disc.candidate_position[:, :2],
+              candidate_panel=np.array([slots[int(s)] for s in disc.candidate_storey]))
     if len(placement.markers):
         first = placement.markers[0]
         floor_map(out_dir / "gain_first.png", **grid, values=loc_gain, cmap="gray_r",
                   title="Information gain of the first marker (dark = high)", colorbar_label="mean gain (nats)",
-                  markers_xy=first.position[None, :2], markers_normal=first.normal[None, :2], marker_labels=["1"])
-    pos = np.array([m.position[:2] for m in placement.markers]).reshape(-1, 2)
-    nrm = np.array([m.normal[:2] for m in placement.markers]).reshape(-1, 2)
-    ex_pos = np.array([m.position[:2] for m in existing]).reshape(-1, 2)
-    ex_nrm = np.array([m.normal[:2] for m in existing]).reshape(-1, 2)
-    labels = [str(i + 1) for i in range(len(pos))] + ["e"] * len(ex_pos)
+                  markers_xy=first.position[None, :2], markers_normal=first.normal[None, :2], marker_labels=["1"],
+                  marker_panel=panel(first.position[2]))
+    markers = list(placement.markers) + list(existing)
+    pos = np.array([m.position for m in markers]).reshape(-1, 3)
+    nrm = np.array([m.normal[:2] for m in markers]).reshape(-1, 2)
+    labels = [str(i + 1) for i in range(len(placement.markers))] + ["e"] * len(existing)
     floor_map(out_dir / "placement.png", **grid, values=loc_after, cmap="gray",
-              title=f"{method}: {len(pos)} markers (numbers = order), score after placement",
+              title=f"{method}: {len(placement.markers)} markers (numbers = order), score after placement",
               colorbar_label="mean score -H over yaws",
-              markers_xy=np.concatenate([pos, ex_pos]), markers_normal=np.concatenate([nrm, ex_nrm]), marker_labels=labels)
+              markers_xy=pos[:, :2], markers_normal=nrm, marker_labels=labels, marker_panel=panel(pos[:, 2]))
     return summary
