@@ -209,6 +209,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_evaluate_parser(sub)
 
+    from .scan.cli import add_scan_parsers
+
+    add_scan_parsers(sub, p_export)  # `fuse` and `scene export ... --as-scan`
+
     return parser
 
 
