@@ -9,7 +9,9 @@ Axis conventions
 
 Materials are kept: textures as (H, W, 3) uint8 RGB arrays (row 0 = top), UVs in the glTF/trimesh
 convention (v grows upwards), per-vertex RGBA colours, and the base colour (glTF
-``baseColorFactor`` / MTL ``Kd``). Identical texture images are shared between parts.
+``baseColorFactor`` / MTL ``Kd``). Identical texture images are shared between parts. Glass
+(glTF ``alphaMode`` BLEND with alpha < 0.9 or ``KHR_materials_transmission``; MTL ``d`` < 0.9 or
+``Tr`` > 0.1) becomes ``MeshPart.transparent`` (:mod:`.transparency`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from .transparency import material_transparency, read_gltf_json
 from .types import MeshPart, Scene
 
 log = logging.getLogger(__name__)
@@ -86,7 +89,7 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     world_from_file[:3, :3] = R * scale
     lo, hi = _world_bounds(instances, world_from_file)
     _check_units(lo, hi, path, scale)
-    parts = _to_parts(instances, world_from_file, path.stem)
+    parts = _to_parts(instances, world_from_file, path.stem, read_gltf_json(path) if is_gltf else None)
     return Scene(name=path.stem, parts=tuple(parts), source=str(path))
 
 
@@ -122,8 +125,12 @@ def _world_bounds(instances: list[tuple], world_from_file: np.ndarray) -> tuple[
     return pts.min(axis=0), pts.max(axis=0)
 
 
-def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str) -> list[MeshPart]:
-    """Convert mesh instances to :class:`MeshPart` in the world frame ((4, 4) ``world_from_file``)."""
+def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str, gltf: dict | None = None) -> list[MeshPart]:
+    """Convert mesh instances to :class:`MeshPart` in the world frame ((4, 4) ``world_from_file``).
+
+    ``gltf`` is the file's glTF JSON (None for OBJ/PLY); see-through materials become
+    ``MeshPart.transparent`` by the rules of :mod:`.transparency`.
+    """
     parts: list[MeshPart] = []
     textures: dict[str, np.ndarray] = {}
     untextured = 0
@@ -142,6 +149,9 @@ def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str) ->
         if texture is None and colors is None and base is None:
             untextured += 1
             base = GREY
+        transparent, opacity = material_transparency(getattr(mesh.visual, "material", None), gltf)
+        if opacity is not None:  # OBJ: the MTL's dissolve becomes the base colour alpha
+            base = (*(base if base is not None else (1.0, 1.0, 1.0, 1.0))[:3], opacity)
         name = geom_name or f"{stem}_{i}"
         parts.append(
             MeshPart(
@@ -153,6 +163,7 @@ def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str) ->
                 texture=texture,
                 base_color=tuple(float(c) for c in (base if base is not None else (1.0, 1.0, 1.0, 1.0))),
                 normals=None if normals is None else normals.astype(np.float32),
+                transparent=transparent,
             )
         )
     if untextured:
