@@ -4,6 +4,10 @@ glTF is y-up: a world point (x, y, z) (z up) is written as (x, z, -y), the inver
 conversion. UVs are flipped to glTF's convention (v down, origin at the image's top-left).
 Textures are embedded once each as PNG (parts sharing one array share one image), materials are
 metallic-roughness with metallic 0 and roughness 1, and the file is written atomically.
+Transparent parts (``MeshPart.transparent``, glass) get their own materials with
+``alphaMode: "BLEND"``, ``doubleSided`` and a ``baseColorFactor`` alpha below 1
+(:func:`~markerplace.scene.transparency.drawn_alpha`: the part's alpha, or about 0.3), which the
+loader reads back as transparent.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io_utils import atomic_path
+from .transparency import drawn_alpha
 from .types import Scene
 
 log = logging.getLogger(__name__)
@@ -88,13 +93,21 @@ class _GlbBuilder:
             self._images[key] = len(self.tree["textures"]) - 1
         return self._images[key]
 
-    def material(self, name: str, base_color, texture: np.ndarray | None) -> int:
-        key = (tuple(float(c) for c in base_color), None if texture is None else id(texture))
+    def material(self, name: str, base_color, texture: np.ndarray | None, transparent: bool = False) -> int:
+        """Material index for a base colour, texture and transparency (one material per distinct key)."""
+        color = tuple(float(c) for c in base_color)
+        if transparent:
+            color = color[:3] + (drawn_alpha(color[3]),)
+        key = (color, None if texture is None else id(texture), bool(transparent))
         if key not in self._materials:
-            pbr: dict = {"baseColorFactor": list(key[0]), "metallicFactor": 0.0, "roughnessFactor": 1.0}
+            pbr: dict = {"baseColorFactor": list(color), "metallicFactor": 0.0, "roughnessFactor": 1.0}
             if texture is not None:
                 pbr["baseColorTexture"] = {"index": self.image(texture)}
-            self.tree["materials"].append({"name": name, "pbrMetallicRoughness": pbr})
+            material = {"name": name, "pbrMetallicRoughness": pbr}
+            if transparent:
+                material["alphaMode"] = "BLEND"
+                material["doubleSided"] = True
+            self.tree["materials"].append(material)
             self._materials[key] = len(self.tree["materials"]) - 1
         return self._materials[key]
 
@@ -137,7 +150,7 @@ def scene_to_glb_bytes(scene: Scene) -> bytes:
         prim = {
             "attributes": attrs,
             "indices": b.accessor(indices, _UINT, "SCALAR", _ELEMENT_ARRAY_BUFFER),
-            "material": b.material(part.name, part.base_color, texture),
+            "material": b.material(part.name, part.base_color, texture, part.transparent),
             "mode": 4,
         }
         b.tree["meshes"].append({"name": part.name, "primitives": [prim]})
