@@ -254,7 +254,14 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
     rc = RayCaster(V, F)
     grid = _grid_for(V, cfg)
     surfaces = cast_columns(rc, grid, cfg.floor)
-    storeys, ceilings = find_storeys(surfaces, cfg.floor)
+    sections = Sections(V, F)
+
+    def has_walls(floor_z: float, area: float) -> bool:
+        """Walls cross the eye level above a floor: cut length at least its area's perimeter."""
+        seg, _ = sections.at(floor_z + cfg.height)
+        return float(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1).sum()) >= 4 * np.sqrt(area)
+
+    storeys, ceilings = find_storeys(surfaces, cfg.floor, has_walls)
     if not storeys:
         raise UserError("no floor found: no near-horizontal surface with headroom above it; check --up "
                         "(and --unit-scale) of the mesh")
@@ -270,7 +277,6 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
              len(storeys), heights, surfaces.orientation,
              "all" if cfg.level is None else f"storey {cfg.level}")
 
-    sections = Sections(V, F)
     start = None if cfg.start is None else np.asarray(cfg.start, dtype=float).reshape(2)
     per_storey = []
     for s in planned:

@@ -10,12 +10,12 @@ Walls are invisible to vertical rays; they come from horizontal cross-sections
 
 Storeys
 -------
-Standable area is histogrammed by height. The heaviest height is the first storey's floor; more
-floors are taken in order of area when they hold at least ``min_storey_area`` (and
-``min_storey_frac`` of the largest) and lie ``min_storey_separation`` from every floor already
-taken, so table, bed and stair tops never become storeys. When the model has ceilings (some
-floor peak has a ceiling over at least half of it), floor peaks mostly without a ceiling (roof
-tops, terrain around the building) are not storeys.
+Standable area under a ceiling is histogrammed by height. The heaviest height is the first
+storey's floor; more floors are taken in order of area when they hold at least
+``min_storey_area`` (and ``min_storey_frac`` of the largest) and lie ``min_storey_separation``
+from every floor already taken, so table, bed and stair tops never become storeys. Standable
+area without a ceiling (roof tops, terrain around the building, an open-top model, a storey
+whose ceiling a scan missed) then adds storeys only where walls cross its eye level.
 
 A storey's floor map
 --------------------
@@ -25,7 +25,8 @@ room, thresholds and ramps belong to it. Within the band:
 1. cells need a ceiling when the storey has one over most of its floor (the ceiling mask is
    closed by ``ceiling_hole_fill`` first, so scan holes in a ceiling do not cut a room); this
    keeps free space inside the building when walls have holes, glass or open windows;
-2. small holes in the floor (scan dropouts) are filled by a closing of ``floor_hole_fill``;
+2. small holes in the floor (scan dropouts: nothing at all above them up to eye level) are
+   filled by a closing of ``floor_hole_fill``;
 3. *plateaus* are dropped: connected patches of even height whose border mostly drops to lower
    floor of the same storey (bed and sofa tops, low tables), while a sunken room's border steps
    up and is kept;
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -239,50 +241,55 @@ def cast_columns(rc: RayCaster, grid: Grid, config: FloorConfig = FloorConfig(),
     return Surfaces(grid, cell[keep], z[keep], head[keep], orientation)
 
 
-def find_storeys(surfaces: Surfaces, config: FloorConfig = FloorConfig()) -> tuple[list[float], list[bool]]:
-    """Floor heights of the storeys (ascending, world metres) and whether each has ceilings."""
-    if len(surfaces.z) == 0:
-        return [], []
-    cell_area = surfaces.grid.res ** 2
-    z = surfaces.z
-    ceil = surfaces.has_ceiling(config.max_ceiling)
-    bin_w = 0.05
+def _peaks(z: np.ndarray, cell_area: float, bin_w: float = 0.05, radius: float = 0.15) -> list[tuple[float, float]]:
+    """Heights holding most standable area, heaviest first: (floor z to 1 mm, area m^2)."""
+    if len(z) == 0:
+        return []
     lo = np.floor(z.min() / bin_w) * bin_w
     bins = np.floor((z - lo) / bin_w).astype(np.int64)
-    area = np.bincount(bins) * cell_area
-    peaks: list[tuple[float, float, float]] = []  # (floor z, area, ceiling fraction)
-    remaining = area.copy()
+    remaining = np.bincount(bins) * cell_area
+    centres = lo + (np.arange(len(remaining)) + 0.5) * bin_w
+    peaks = []
     for _ in range(64):
         b = int(np.argmax(remaining))
         if remaining[b] <= 0:
             break
-        centre = lo + (b + 0.5) * bin_w
-        near = np.abs(z - centre) <= 0.15
-        fz = round(_weighted_median(z[near]), 3)
-        member = np.abs(z - fz) <= 0.15
-        peaks.append((fz, member.sum() * cell_area, float(ceil[member].mean())))
-        gone = np.abs(lo + (np.arange(len(area)) + 0.5) * bin_w - fz) <= 0.15 + bin_w
-        if not gone[b]:
-            gone[b] = True
+        fz = round(float(np.median(z[np.abs(z - centres[b]) <= radius])), 3)
+        peaks.append((fz, float((np.abs(z - fz) <= radius).sum() * cell_area)))
+        gone = np.abs(centres - fz) <= radius + bin_w
+        gone[b] = True
         remaining[gone] = 0.0
-    has_indoor = any(frac >= 0.5 for _, _, frac in peaks)
+    return peaks
+
+
+def find_storeys(surfaces: Surfaces, config: FloorConfig = FloorConfig(),
+                 has_walls: Callable[[float, float], bool] | None = None) -> tuple[list[float], list[bool]]:
+    """Floor heights of the storeys (ascending, world metres) and whether each has ceilings.
+
+    Floors under a ceiling come first (heaviest first, each ``min_storey_separation`` from the
+    others); then floors without a ceiling (an open-top model, a storey whose ceiling a scan
+    missed) when ``has_walls(floor z, area)`` says walls cross their eye level, which a roof top
+    or the terrain around a building lacks (or, for terrain, it lies too close to a storey).
+    """
+    if len(surfaces.z) == 0:
+        return [], []
+    cell_area = surfaces.grid.res ** 2
+    ceil = surfaces.has_ceiling(config.max_ceiling)
     floors: list[tuple[float, bool]] = []
     largest = 0.0
-    for fz, a, frac in sorted(peaks, key=lambda p: -p[1]):
-        if has_indoor and frac < 0.3:
-            continue  # roof top or terrain
-        if a < config.min_storey_area or a < config.min_storey_frac * largest:
-            continue
-        if any(abs(fz - g) < config.min_storey_separation for g, _ in floors):
-            continue
-        largest = max(largest, a)
-        floors.append((fz, has_indoor and frac >= 0.3))
+    for with_ceiling in (True, False):
+        sel = ceil if with_ceiling else ~ceil
+        for fz, a in _peaks(surfaces.z[sel], cell_area):
+            if a < config.min_storey_area or a < config.min_storey_frac * largest:
+                continue
+            if any(abs(fz - g) < config.min_storey_separation for g, _ in floors):
+                continue
+            if not with_ceiling and has_walls is not None and not has_walls(fz, a):
+                continue
+            largest = max(largest, a)
+            floors.append((fz, with_ceiling))
     floors.sort()
     return [f for f, _ in floors], [c for _, c in floors]
-
-
-def _weighted_median(v: np.ndarray) -> float:
-    return float(np.median(v)) if len(v) else float("nan")
 
 
 def _disk(radius_cells: float) -> np.ndarray:
@@ -354,7 +361,11 @@ def storey_floor(surfaces: Surfaces, floor_z: float, ceilings: bool, config: Flo
     valid = valid.reshape(H, W)
     h[~valid] = np.nan
     # fill small holes: height and headroom of the nearest valid cell
-    filled = _close(valid, config.floor_hole_fill / g.res) & ~valid
+    # only where nothing at all stands between the band and eye level (furniture is no hole)
+    something = np.zeros(H * W, bool)
+    up_to_eye = (surfaces.z > floor_z + config.band) & (surfaces.z < floor_z + config.band + 1.5)
+    something[surfaces.cell[up_to_eye]] = True
+    filled = _close(valid, config.floor_hole_fill / g.res) & ~valid & ~something.reshape(H, W)
     if filled.any() and valid.any():
         _, (ri, ci) = distance_transform_edt(~valid, return_indices=True)
         h[filled] = h[ri[filled], ci[filled]]

@@ -111,7 +111,7 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
         fig.suptitle(title)
     fig.colorbar(sc, ax=list(axes.flat), shrink=0.8, label=colorbar_label)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+        fig.savefig(tmp, format="png", bbox_inches="tight")
     plt.close(fig)
 
 
