@@ -25,13 +25,9 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def _parse_pose(text: str):
-    parts = text.split(",")
-    if len(parts) != 4:
-        raise UserError(f"--pose {text!r} must be X,Y,Z,YAW_DEG (four comma-separated numbers)")
-    try:
-        return [float(v) for v in parts]
-    except ValueError:
-        raise UserError(f"--pose {text!r} must be X,Y,Z,YAW_DEG (four comma-separated numbers)") from None
+    from .validation import COORDINATE, YAW_DEG, parse_floats
+
+    return parse_floats(text, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
 
 
 def cmd_scene_list(args: argparse.Namespace) -> int:
@@ -48,6 +44,9 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
     from .scene import load_scene
     from .scene.export import export_glb
 
+    from .validation import check_output_file
+
+    check_output_file(args.out, "scene export OUT")
     scene = load_scene(args.name, seed=args.seed)
     export_glb(scene, args.out)
     log.info("wrote %s (%d faces)", args.out, scene.num_faces)
@@ -63,16 +62,24 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render.views import default_pose, write_render_outputs
     from .scene import load_scene
 
+    from .validation import check_output_file, check_pose_in_scene, check_render_sees_something
+    from .worldframe import markers_to_internal, points_to_internal, world_offset
+
+    pose = _parse_pose(args.pose) if args.pose else None
+    check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
     scene = load_scene(args.scene, up=args.up, unit_scale=args.unit_scale, seed=args.seed)
-    markers = load_markers(args.markers) if args.markers else []
-    if args.pose:
-        x, y, z, yaw_deg = _parse_pose(args.pose)
-        world_from_cam = world_from_cam_pose(np.array([x, y, z]), np.radians(yaw_deg))
+    offset = world_offset(scene)  # inputs are in the user's (file) frame
+    markers = markers_to_internal(load_markers(args.markers), offset) if args.markers else []
+    if pose is not None:
+        position = points_to_internal(pose[:3], offset)
+        check_pose_in_scene(scene, position, offset)
+        world_from_cam = world_from_cam_pose(position, np.radians(pose[3]))
     else:
         world_from_cam = default_pose(scene)
     intr = Intrinsics.from_fov(args.width, args.height, args.hfov)
     with Renderer(scene, intr, markers=markers) as renderer:
         result = renderer.render(world_from_cam)
+    check_render_sees_something(result, args.pose)
     paths = write_render_outputs(args.out, result)
     for p in paths:
         print(p)
@@ -82,13 +89,26 @@ def cmd_render(args: argparse.Namespace) -> int:
 def _parse_xy(text: str | None):
     if text is None:
         return None
-    parts = text.split(",")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        return (float(parts[0]), float(parts[1]))
-    except ValueError:
-        raise UserError(f"--start {text!r} must be X,Y (two comma-separated numbers, metres)") from None
+    from .validation import COORDINATE, parse_floats
+
+    return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
+
+
+def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
+    """``config`` with ``--start`` moved into the scene's internal frame
+    (:mod:`markerplace.worldframe`), after the run-size guard
+    (:func:`markerplace.validation.check_run_size`; ``force`` = ``--force``)."""
+    from dataclasses import replace
+
+    from .validation import check_run_size, estimate_run
+    from .worldframe import points_to_internal, world_offset
+
+    offset = world_offset(scene)
+    if config.discretize.start is not None and offset.any():
+        start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
+        config = replace(config, discretize=replace(config.discretize, start=start))
+    check_run_size(estimate_run(scene, config, evaluate_config, extra_placements), force=force)
+    return config
 
 
 def _parse_level(text: str):
@@ -127,16 +147,27 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .planner import first_pick_gain, place, prepare, validate
     from .report.plan_outputs import write_plan_outputs
 
+    from .markers import check_markers_on_walls
+    from .validation import check_output_dir
+    from .worldframe import markers_to_internal, world_offset
+
     config = plan_config_from_args(args)
     validate(config)
     existing = load_markers(args.existing) if args.existing else []
+    check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
+    scene = spec.load()
+    offset = world_offset(scene)  # user inputs and outputs are in the file's frame
+    existing = markers_to_internal(existing, offset)
+    check_markers_on_walls(scene, existing, f"--existing {args.existing}")
+    run_config = plan_inputs_in_scene_frame(config, scene, args.force)
     progress = not args.quiet
-    data = prepare(spec, config, args.out, existing=existing, progress=progress)
+    data = prepare(spec, run_config, args.out, existing=existing, progress=progress)
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
-                                 method=config.placement.method, scene_source=args.scene, existing=existing)
+                                 method=config.placement.method, scene_source=args.scene, existing=existing,
+                                 world_offset=offset)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
@@ -163,6 +194,9 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
     g.add_argument("--placement-seed", type=int, default=0, help="seed of the random/uniform baselines (default 0)")
     g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
+    g.add_argument("--force", action="store_true",
+                   help="run even when the size guard estimates more poses, memory or time than the limits "
+                        "(200,000 poses, 80%% of this machine's memory, 12 h)")
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
 
 
@@ -228,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from .validation import check_args
+
+        check_args(args)  # every numeric option of every subcommand: finite and in range
         return int(func(args) or 0)
     except UserError as err:
         print(f"markerplace: error: {err}", file=sys.stderr)

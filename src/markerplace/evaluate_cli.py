@@ -15,13 +15,9 @@ log = logging.getLogger("markerplace.cli")
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise UserError(f"{option} {text!r} must be a comma-separated list of integers, e.g. 5,10,15,20") from None
-    if not values:
-        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
-    return values
+    from .validation import EVAL_K, parse_int_list
+
+    return parse_int_list(text, option, EVAL_K)
 
 
 def _name_list(text: str) -> tuple[str, ...]:
@@ -51,10 +47,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
     from dataclasses import replace
 
-    from .cli import plan_config_from_args
-    from .evaluation import validate_evaluate_config
+    from .cli import plan_config_from_args, plan_inputs_in_scene_frame
+    from .evaluation import find_placement_files, validate_evaluate_config
+    from .markers import load_markers
     from .observe import SceneSpec
+    from .planner import validate
     from .testbed import run_evaluation
+    from .validation import check_output_dir
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
@@ -62,8 +61,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         raise UserError("--methods is empty: give a comma list such as none,omp,random,uniform (or --placements DIR)")
     plan_config = plan_config_from_args(args)
     plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.ks)))
+    validate(plan_config)
+    # every input file is read before any work: a bad --placements fails in a second, not after the plan
+    placement_files = find_placement_files(args.placements) if args.placements else {}
+    for path in placement_files.values():
+        load_markers(path)
+    check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
-    run_evaluation(spec, plan_config, config, args.out, placements_dir=args.placements,
+    run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))
+    run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,
                    progress=not getattr(args, "quiet", False))
     text = (Path(args.out) / "tables.md").read_text()
     first = text.split("## All thresholds")[0].strip()

@@ -112,3 +112,58 @@ def load_markers(path: str | Path) -> list[Marker]:
                             "tag_id is an integer, size a number, position/normal 3 numbers, "
                             "world_from_marker a 4x4 list") from None
     return markers
+
+
+WALL_TOLERANCE_M = 0.05
+"""An existing tag's centre must be within this of a wall surface behind it."""
+MIN_OPEN_M = 0.3
+"""Free space needed in front of an existing tag (else it faces into the wall or a cupboard)."""
+MAX_NORMAL_Z = 0.3
+"""|n_z| of an existing tag's normal: tags hang on near-vertical walls."""
+MIN_WALL_ALIGNMENT = 0.85
+"""|cos| between the tag normal and the wall surface behind it (about 30 deg)."""
+
+
+def check_markers_on_walls(scene, markers, source: str = "markers", tolerance: float = WALL_TOLERANCE_M) -> None:
+    """Refuse markers that do not hang on a wall of ``scene`` (both in the internal frame).
+
+    Each marker needs a near-horizontal normal (|n_z| <= 0.3), a surface roughly parallel to
+    the tag (|cos| >= 0.85) within ``tolerance`` metres of its centre along -normal, and at least
+    0.3 m of open space in front of it (else its normal points into the wall). Rays are cast
+    with :class:`~markerplace.raycast.RayCaster` on ``scene.geometry()``.
+
+    Raises:
+        UserError: naming ``source``, the first offending marker's tag id and its position in
+            the user's frame (:mod:`markerplace.worldframe`), and what is wrong.
+    """
+    if not markers:
+        return
+    from .raycast import RayCaster
+    from .worldframe import points_to_user, world_offset
+
+    P = np.array([m.position for m in markers], dtype=float).reshape(-1, 3)
+    N = np.array([m.normal for m in markers], dtype=float).reshape(-1, 3)
+    N = N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-12)
+    rc = RayCaster(*scene.geometry())
+    ray, t, face = rc.all_hits(P + tolerance * N, -N, max_t=2.0 * tolerance)
+    aligned = np.abs(np.einsum("ij,ij->i", rc.face_normal[face], N[ray])) >= MIN_WALL_ALIGNMENT
+    on_wall = np.zeros(len(markers), dtype=bool)
+    on_wall[ray[aligned]] = True
+    back_t = np.full(len(markers), np.inf)
+    np.minimum.at(back_t, ray[aligned], t[aligned])
+    # open space in front, measured from just in front of the wall surface found behind the tag
+    wall = P + tolerance * N - np.where(np.isfinite(back_t), back_t, tolerance)[:, None] * N
+    front_t, _ = rc.first_hits(wall + 0.01 * N, N, max_t=MIN_OPEN_M)
+    offset = world_offset(scene)
+    for i, m in enumerate(markers):
+        x, y, z = points_to_user(P[i], offset)
+        what = f"{source}: tag {m.tag_id} at ({x:.2f}, {y:.2f}, {z:.2f})"
+        if abs(N[i, 2]) > MAX_NORMAL_Z:
+            raise UserError(f"{what} has normal ({N[i, 0]:.2f}, {N[i, 1]:.2f}, {N[i, 2]:.2f}), not horizontal: tags hang "
+                            "on walls; give the wall's outward normal")
+        if not on_wall[i]:
+            raise UserError(f"{what} is not on a wall: no wall surface within {100 * tolerance:.0f} cm behind it "
+                            "(along -normal); give the tag centre on the wall and the normal pointing out of it")
+        if np.isfinite(front_t[i]):
+            raise UserError(f"{what} faces into the wall or an obstacle: something is {front_t[i] + 0.01:.2f} m in front "
+                            f"of it (under {MIN_OPEN_M:g} m); check that its normal points out of the wall into the room")

@@ -110,23 +110,9 @@ def validate(config: PlanConfig) -> None:
         raise UserError(f"--method {p.method!r} is not known: use one of {', '.join(METHODS)}")
     if p.marker_model not in MARKER_MODELS:
         raise UserError(f"--marker-model {p.marker_model!r} is not known: use one of {', '.join(MARKER_MODELS)}")
-    if not 0.0 <= p.v <= 100.0:
-        raise UserError(f"-v {p.v} is outside [0, 100]: give a percentage such as 90")
-    if p.k < 1:
-        raise UserError(f"-k {p.k} must be at least 1")
-    d = config.discretize
-    if d.num_yaws < 1:
-        raise UserError(f"--yaws {d.num_yaws} must be at least 1")
-    if d.grid_spacing <= 0.0:
-        raise UserError(f"--grid-spacing {d.grid_spacing} must be positive, e.g. 0.5 (metres)")
-    if d.clearance < 0.0:
-        raise UserError(f"--clearance {d.clearance} must not be negative")
-    if d.marker_spacing <= 0.0:
-        raise UserError(f"--marker-spacing {d.marker_spacing} must be positive, e.g. 1.0 (metres)")
-    if config.observe.workers < 0:
-        raise UserError(f"--workers {config.observe.workers} must be 0 (automatic) or more")
-    if not 0.02 <= p.tag_size <= 3.0:
-        raise UserError(f"--tag-size {p.tag_size} m is out of range: give the black-square edge in metres, e.g. 0.4")
+    from .validation import check_plan_config
+
+    check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
 
 
 def _marker_info(model: str, world_from_cam: np.ndarray, world_from_marker: np.ndarray, size: float,

@@ -539,7 +539,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     t0 = time.perf_counter()
     extra = {}
     if placements_dir is not None:
-        extra = {name: load_markers(p) for name, p in ev.find_placement_files(placements_dir).items()}
+        from .worldframe import markers_to_internal, world_offset
+
+        # placement files are in the user's (file) frame; the scene may be recentred
+        extra = {name: markers_to_internal(load_markers(p), world_offset(scene))
+                 for name, p in ev.find_placement_files(placements_dir).items()}
     placements = ev.build_placements(data, plan_config.placement, config, extra)
     timings["placements"] = time.perf_counter() - t0
     log.info("evaluating %d marker sets: %s", len(placements),

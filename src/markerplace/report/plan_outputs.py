@@ -59,9 +59,22 @@ def write_placement(out_dir: Path, placement, method: str, scene_source: str, ex
 
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
-                       scene_source: str, existing: Sequence = ()) -> dict:
-    """Write every output of a plan run and return a summary dict (also in placement.json)."""
+                       scene_source: str, existing: Sequence = (), world_offset=None) -> dict:
+    """Write every output of a plan run and return a summary dict (also in placement.json).
+
+    ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
+    written is moved into the user's frame by ``world_offset`` ((3,) metres, see
+    :mod:`markerplace.worldframe`; None = not shifted).
+    """
     out_dir = Path(out_dir)
+    if world_offset is not None and np.any(world_offset):
+        from dataclasses import replace
+
+        from ..worldframe import discretization_to_user, markers_to_user
+
+        data = replace(data, disc=discretization_to_user(data.disc, world_offset))
+        placement = replace(placement, markers=markers_to_user(placement.markers, world_offset))
+        existing = markers_to_user(existing, world_offset)
     disc = data.disc
     score_after = -entropy(placement.info_after)
     L = len(disc.locations)

@@ -7,6 +7,20 @@ Axis conventions
 * OBJ and PLY have no convention: ``up`` names the file's up axis (default ``"z"``).
 * ``unit_scale`` multiplies coordinates after the rotation (e.g. 0.01 for centimetres).
 
+Checks and recentring (:mod:`markerplace.scene.sanity`)
+--------------------------------------------------------
+* Vertices with NaN/inf coordinates are dropped with the faces using them (a warning gives the
+  counts); a file with more than 5 % such vertices is refused.
+* A model whose bounding-box centre lies more than 1 km from the origin (survey coordinates) is
+  recentred in float64 before the float32 conversion: internal = file (rotated, scaled) -
+  ``offset``, a whole-metre (3,) vector kept in ``scene.meta["world_offset"]``. This is the only
+  place the shift is applied; :mod:`markerplace.worldframe` undoes it on every coordinate the
+  user gives or reads (``--pose``, ``--start``, ``--existing``, ``--markers``, ``--placements``,
+  placement.json/csv, tag sheets, scores.npz, figures), so users only ever see file coordinates.
+* Up axis: when the floor (area facing up at the bottom, furniture tops above it) fits another
+  axis far better than the one read, a warning names the ``--up`` value to try.
+* Texture files a ``.gltf`` or ``.mtl`` names but that are missing are named in a warning.
+
 Materials are kept: textures as (H, W, 3) uint8 RGB arrays (row 0 = top), UVs in the glTF/trimesh
 convention (v grows upwards), per-vertex RGBA colours, and the base colour (glTF
 ``baseColorFactor`` / MTL ``Kd``). Identical texture images are shared between parts. Glass
@@ -23,6 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from ..worldframe import OFFSET_KEY
+from . import sanity
 from .transparency import material_transparency, read_gltf_json
 from .types import MeshPart, Scene
 
@@ -87,10 +103,17 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
         raise UserError(f"{path}: the file contains no triangle faces (a point cloud or empty mesh?); give a triangle mesh")
     world_from_file = np.eye(4)
     world_from_file[:3, :3] = R * scale
+    instances = sanity.drop_non_finite(instances, world_from_file, path)
     lo, hi = _world_bounds(instances, world_from_file)
     _check_units(lo, hi, path, scale)
+    offset = sanity.recentre_offset(lo, hi)
+    world_from_file[:3, 3] = -offset  # the one place the internal frame is shifted (markerplace.worldframe)
+    sanity.warn_missing_textures(path)
     parts = _to_parts(instances, world_from_file, path.stem, read_gltf_json(path) if is_gltf else None)
-    return Scene(name=path.stem, parts=tuple(parts), source=str(path))
+    scene = Scene(name=path.stem, parts=tuple(parts), source=str(path),
+                  meta={OFFSET_KEY: offset.tolist()} if np.any(offset) else {})
+    sanity.check_up_axis(scene, R, _UP_ROTATIONS, path, up if up is not None else ("y" if is_gltf else "z"))
+    return scene
 
 
 def _read_instances(path: Path, ext: str) -> list[tuple]:

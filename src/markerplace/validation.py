@@ -1,0 +1,479 @@
+"""Checks of user input before any work starts: option values, output paths and run size.
+
+Everything here raises :class:`~markerplace.errors.UserError` (one line, exit code 2) and runs
+in milliseconds, before the expensive stages.
+
+* **Option values.** Every numeric command-line option has one :class:`Bound` (finite, in a
+  range, with its unit and an example) in :data:`BOUNDS`; :func:`check_args` applies them to a
+  parsed command line (called once by :func:`markerplace.cli.main` for every subcommand), and
+  :func:`check_plan_config` / :func:`check_evaluate_config` apply the same bounds to the
+  library's config objects. :func:`parse_floats` and :func:`parse_int_list` parse the
+  comma-separated options (``--pose``, ``--start``, ``--k``).
+* **Output paths.** :func:`check_output_dir` (``--out`` of ``plan``/``evaluate``) and
+  :func:`check_output_file` (``render --out PREFIX``, ``scene export OUT``) create what is
+  missing and prove the place is writable with a real test write (``os.access`` says yes to
+  root even on read-only folders).
+* **Run size.** :func:`estimate_run` estimates the camera poses (an upper bound from the
+  model's footprint), the peak memory and the wall-clock time of a ``plan``/``evaluate`` run
+  from the costs measured on the reference machine (README, Benchmarks); :func:`check_run_size`
+  refuses, with the numbers and the ``--force`` flag, a run over :class:`SizeLimits`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+from .errors import UserError
+
+log = logging.getLogger(__name__)
+
+SEED_MAX = 2**32 - 1
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Allowed values of one numeric option.
+
+    Attributes:
+        option: the flag as the user types it (``--grid-spacing``).
+        lo, hi: inclusive range.
+        unit: unit printed after the numbers (``m``, ``px``, ``deg``, ``%``), or ``""``.
+        hint: what to give instead, e.g. ``"the camera grid spacing in metres, e.g. 0.5"``.
+        integer: the option is an integer (messages say "at least"/"at most").
+    """
+
+    option: str
+    lo: float
+    hi: float
+    unit: str
+    hint: str
+    integer: bool = False
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` unchanged, or raise :class:`UserError` naming the option, the value,
+        the range with its unit and what to give instead."""
+        unit = f" {self.unit}" if self.unit else ""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise UserError(f"{self.option} {value!r} is not a number: give {self.hint}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise UserError(f"{self.option} {value} is not a finite number: give {self.hint}")
+        if self.integer and value != int(value):
+            raise UserError(f"{self.option} {value} must be a whole number: give {self.hint}")
+        if self.integer:
+            if value < self.lo:
+                raise UserError(f"{self.option} {_fmt(value)} must be at least {_fmt(self.lo)}{unit}: give {self.hint}")
+            if value > self.hi:
+                raise UserError(f"{self.option} {_fmt(value)} must be at most {_fmt(self.hi)}{unit}: give {self.hint}")
+        elif not self.lo <= value <= self.hi:
+            raise UserError(f"{self.option} {_fmt(value)}{unit} is outside [{_fmt(self.lo)}, {_fmt(self.hi)}]{unit}: "
+                            f"give {self.hint}")
+        return value
+
+
+def _fmt(v: float) -> str:
+    """A short text of a number (huge integers abbreviated)."""
+    if isinstance(v, int):
+        text = str(v)
+        return text if len(text) <= 15 else f"{text[:4]}...({len(text.lstrip('-'))} digits)"
+    if v.is_integer() and abs(v) < 1e15:
+        return str(int(v))
+    return f"{v:g}"
+
+
+# Occupancy cell size of the discretization: finer camera or marker spacing means nothing.
+_CELL = 0.05
+
+UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
+SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
+PLACEMENT_SEED = Bound("--placement-seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
+TEST_SEED = Bound("--test-seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 3", integer=True)
+K = Bound("-k", 1, 10_000, "", "the number of markers to place, e.g. 20", integer=True)
+V = Bound("-v", 0.0, 100.0, "%", "a percentage such as 90")
+TAG_SIZE = Bound("--tag-size", 0.02, 3.0, "m", "the black-square edge in metres, e.g. 0.4")
+PLANE_HEIGHT = Bound("--height", 0.1, 10.0, "m", "the eye-level plane height above the floor in metres, e.g. 1.5")
+LEVEL = Bound("--level", 0, 1000, "", "a storey index, 0 = lowest", integer=True)
+GRID_SPACING = Bound("--grid-spacing", _CELL, 50.0, "m",
+                     f"the camera grid spacing in metres, e.g. 0.5 (not finer than the {_CELL:g} m occupancy grid)")
+CLEARANCE = Bound("--clearance", 0.0, 5.0, "m", "the distance of cameras from obstacles in metres, e.g. 0.3")
+YAWS = Bound("--yaws", 1, 360, "", "camera yaws per location, e.g. 8", integer=True)
+MARKER_SPACING = Bound("--marker-spacing", _CELL, 100.0, "m",
+                       f"the spacing of candidate markers in metres, e.g. 1.0 (not finer than {_CELL:g} m)")
+WORKERS = Bound("--workers", 0, 256, "", "0 (automatic) or a number of processes, e.g. 2", integer=True)
+IMAGE_WIDTH = Bound("--width", 16, 4096, "px", "an image width in pixels, e.g. 600", integer=True)
+IMAGE_HEIGHT = Bound("--height", 16, 4096, "px", "an image height in pixels, e.g. 450", integer=True)
+HFOV = Bound("--hfov", 1.0, 170.0, "deg", "a horizontal field of view in degrees, e.g. 90")
+TESTS = Bound("--tests", 1, 100_000, "", "test images per test set, e.g. 200", integer=True)
+RUNS = Bound("--runs", 1, 1000, "", "placements per random/uniform baseline, e.g. 5", integer=True)
+EVAL_K = Bound("--k", 1, 10_000, "", "positive marker counts, e.g. 5,10,15,20", integer=True)
+TAG_SCALE = Bound("--tag-scale", 0.1, 5.0, "", "a factor in [0.1, 5], e.g. 1.25")
+SHIFT = Bound("--shift", 0.0, 5.0, "m", "a distance in [0, 5] metres, e.g. 0.1")
+COORDINATE = Bound("coordinate", -1e7, 1e7, "m", "world coordinates in metres")
+YAW_DEG = Bound("yaw", -1e6, 1e6, "deg", "a yaw in degrees")
+
+_SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
+_PLAN_OPTIONS = {**_SCENE_OPTIONS, "v": V, "tag_size": TAG_SIZE, "height": PLANE_HEIGHT, "level": LEVEL,
+                 "grid_spacing": GRID_SPACING, "clearance": CLEARANCE, "yaws": YAWS, "marker_spacing": MARKER_SPACING,
+                 "placement_seed": PLACEMENT_SEED, "workers": WORKERS}
+
+BOUNDS: dict[str, dict[str, Bound]] = {
+    "scene export": {"seed": SEED},
+    "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
+    "plan": {**_PLAN_OPTIONS, "k": K},
+    "evaluate": {**_PLAN_OPTIONS, "tests": TESTS, "runs": RUNS, "test_seed": TEST_SEED, "tag_scale": TAG_SCALE,
+                 "shift": SHIFT},
+}
+"""Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
+pixels, ``plan --height`` metres). Comma-separated options are parsed by :func:`parse_floats` /
+:func:`parse_int_list` and checked there."""
+
+
+def command_name(args) -> str:
+    """``"plan"``, ``"render"``, ``"evaluate"``, ``"scene export"``, ... of a parsed command line."""
+    name = getattr(args, "command", None) or ""
+    if name == "scene":
+        name = f"scene {getattr(args, 'scene_command', '') or ''}".strip()
+    return name
+
+
+def check_args(args) -> None:
+    """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
+    default, skipped) and parse-check ``--pose``, ``--start`` and ``evaluate --k``."""
+    for dest, bound in BOUNDS.get(command_name(args), {}).items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            bound.check(value)
+    if getattr(args, "pose", None) is not None:
+        parse_floats(args.pose, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
+    if getattr(args, "start", None) is not None:
+        parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
+    if command_name(args) == "evaluate" and isinstance(getattr(args, "k", None), str):
+        parse_int_list(args.k, "--k", EVAL_K)
+
+
+def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:
+    """Parse ``"a,b,..."`` into ``len(names)`` finite numbers within ``bounds``.
+
+    Raises:
+        UserError: wrong count, not numbers, or a value not finite / out of its bound.
+    """
+    form = ",".join(names)
+    parts = str(text).split(",")
+    try:
+        if len(parts) != len(names):
+            raise ValueError
+        values = [float(p) for p in parts]
+    except ValueError:
+        raise UserError(f"{option} {text!r} must be {form} ({len(names)} comma-separated numbers)") from None
+    for name, value, bound in zip(names, values, bounds):
+        if not math.isfinite(value) or not bound.lo <= value <= bound.hi:
+            raise UserError(f"{option} {text!r}: {name} = {value:g} is not a finite number within "
+                            f"[{bound.lo:g}, {bound.hi:g}] {bound.unit}; give {form}, {bound.hint}")
+    return values
+
+
+def parse_int_list(text: str, option: str, bound: Bound) -> tuple[int, ...]:
+    """Parse a comma-separated list of integers, each within ``bound``."""
+    try:
+        values = tuple(int(v) for v in str(text).split(",") if v.strip())
+    except ValueError:
+        raise UserError(f"{option} {text!r} must be a comma-separated list of integers, e.g. 5,10,15,20") from None
+    if not values:
+        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
+    for v in values:
+        bound.check(v)
+    return values
+
+
+def check_plan_config(config) -> None:
+    """Numeric settings of a :class:`~markerplace.planner.PlanConfig` (the same bounds as the
+    command line)."""
+    d, p = config.discretize, config.placement
+    K.check(p.k)
+    V.check(p.v)
+    TAG_SIZE.check(p.tag_size)
+    PLACEMENT_SEED.check(p.seed)
+    PLANE_HEIGHT.check(d.height)
+    if d.level is not None:  # None: every storey (--level all)
+        LEVEL.check(d.level)
+    GRID_SPACING.check(d.grid_spacing)
+    CLEARANCE.check(d.clearance)
+    YAWS.check(d.num_yaws)
+    MARKER_SPACING.check(d.marker_spacing)
+    WORKERS.check(config.observe.workers)
+    if d.start is not None:
+        for v in d.start:
+            if not math.isfinite(float(v)):
+                raise UserError(f"--start {d.start} must be two finite numbers (metres)")
+
+
+def check_evaluate_config(config) -> None:
+    """Numeric settings of an :class:`~markerplace.evaluation.EvaluateConfig`."""
+    TESTS.check(config.tests)
+    RUNS.check(config.runs)
+    if not config.ks:
+        raise UserError("--k is empty: give positive marker counts, e.g. 5,10,15,20")
+    for k in config.ks:
+        EVAL_K.check(k)
+    TAG_SCALE.check(config.tag_scale)
+    SHIFT.check(config.shift)
+    SEED.check(config.seed)
+    if config.test_seed is not None:
+        TEST_SEED.check(config.test_seed)
+    if config.vlad_clusters < 2:
+        raise UserError(f"VLAD clusters {config.vlad_clusters} must be at least 2")
+
+
+def check_pose_in_scene(scene, position, offset=(0.0, 0.0, 0.0), margin: float = 0.0) -> None:
+    """Refuse a camera position (internal frame, metres) outside the model's bounding box
+    (grown by ``margin``); the message gives the box in the user's frame (+ ``offset``)."""
+    import numpy as np
+
+    lo, hi = scene.bounds
+    p = np.asarray(position, dtype=float)
+    if np.all(p >= lo - margin) and np.all(p <= hi + margin):
+        return
+    off = np.asarray(offset, dtype=float)
+    lo_u, hi_u, p_u = lo + off, hi + off, p + off
+    box = ", ".join(f"{a} {lo_u[i]:.2f}..{hi_u[i]:.2f}" for i, a in enumerate("xyz"))
+    raise UserError(f"--pose position ({p_u[0]:.2f}, {p_u[1]:.2f}, {p_u[2]:.2f}) is outside the model "
+                    f"({box} m): give a point inside it")
+
+
+def check_render_sees_something(result, pose_text: str | None) -> None:
+    """Refuse a render in which no pixel hit the model (an all-black image, depth 0)."""
+    import numpy as np
+
+    depth = getattr(result, "depth", None)
+    if depth is not None and not np.any(np.asarray(depth) > 0):
+        where = f"--pose {pose_text}" if pose_text else "the default pose"
+        raise UserError(f"the camera at {where} sees nothing of the model (every pixel is empty): "
+                        "give a pose inside the model, looking at its walls")
+
+
+# --- output paths --------------------------------------------------------------------------------
+
+def _first_file_above(path: Path) -> Path | None:
+    """The nearest existing ancestor of ``path`` (itself included) when it is not a folder."""
+    for p in (path, *path.parents):
+        if p.exists() or p.is_symlink():
+            return None if p.is_dir() else p
+    return None
+
+
+def _probe_write(folder: Path, option: str) -> None:
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".markerplace-write-test-", dir=folder)
+    except OSError as err:
+        raise UserError(f"{option} {folder}: cannot write there ({err.strerror or err.__class__.__name__}); "
+                        "choose a writable folder") from None
+    os.close(fd)
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+
+
+def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
+    """Make sure ``path`` is (or can become) a writable folder; create it.
+
+    Raises:
+        UserError: ``path`` or one of its parents is a file, it cannot be created, or a test
+            write into it fails (read-only folder or file system, no permission, disk full).
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{option} {path} is an existing file, not a folder: give a folder path")
+    blocker = _first_file_above(path.parent)
+    if blocker is not None:
+        raise UserError(f"{option} {path}: {blocker} is a file, so no folder can be made under it; give another path")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UserError(f"{option} {path}: cannot create the folder ({err.strerror or err.__class__.__name__}); "
+                        "choose a writable place") from None
+    _probe_write(path, option)
+    return path
+
+
+def check_output_file(path: str | os.PathLike, option: str, suffixes: Sequence[str] = ("",)) -> Path:
+    """Make sure files ``str(path) + suffix`` can be written: their folder is (or can become) a
+    writable folder, and none of them is an existing folder. Creates the folder.
+
+    Raises:
+        UserError: a parent is a file, the folder cannot be created or written, or a target
+            is a folder.
+    """
+    path = Path(path)
+    if str(path).endswith(("/", os.sep)) or path.name in ("", ".", ".."):
+        raise UserError(f"{option} {path}: give a file name (or prefix), not a folder")
+    for suffix in suffixes:
+        target = Path(str(path) + suffix)
+        if target.is_dir():
+            raise UserError(f"{option}: {target} is an existing folder; give a file name (or prefix)")
+    folder = path.parent
+    blocker = _first_file_above(folder)
+    if blocker is not None:
+        raise UserError(f"{option} {path}: {blocker} is a file, so it cannot hold {path.name}; give another path")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UserError(f"{option} {path}: cannot create {folder} ({err.strerror or err.__class__.__name__}); "
+                        "choose a writable place") from None
+    _probe_write(folder, option)
+    return path
+
+
+# --- run size --------------------------------------------------------------------------------------
+
+SECONDS_PER_POSE_CORE = 0.035
+"""Render + SIFT of one 600x450 pose on one core (README, Benchmarks: office, llvmpipe)."""
+BYTES_PER_POSE = 0.8e6
+"""Peak memory per camera pose of the main process (office: 1.55 GB for 1848 poses)."""
+BASE_BYTES = 0.4e9
+"""Main process without poses (libraries, scene)."""
+BYTES_PER_WORKER = 0.35e9
+"""One rendering worker (GL context, scene copy)."""
+BYTES_PER_GRID_CELL = 40.0
+"""Occupancy grid and its distance transforms per 5 cm cell of the model's bounding box."""
+SECONDS_PER_QUERY_CORE = 0.1
+"""Localizing one test image on one core (README, Results: room and office evaluations)."""
+
+
+@dataclass(frozen=True)
+class SizeLimits:
+    """Largest run started without ``--force``.
+
+    Attributes:
+        max_poses: camera poses (estimated upper bound).
+        max_hours: estimated wall-clock hours.
+        memory_fraction: estimated peak memory as a fraction of the machine's memory.
+    """
+
+    max_poses: int = 200_000
+    max_hours: float = 12.0
+    memory_fraction: float = 0.8
+
+
+@dataclass(frozen=True)
+class RunEstimate:
+    """Estimated size of a run (see :func:`estimate_run`).
+
+    Attributes:
+        footprint_m2: area where cameras may stand (bounding box less the clearance), m^2.
+        poses: camera poses, an upper bound (footprint / grid_spacing^2 x yaws).
+        memory_bytes: peak memory, bytes.
+        seconds: wall-clock time on ``workers`` processes.
+        workers: rendering processes.
+        queries: localized test images (``evaluate``; 0 for ``plan``).
+    """
+
+    footprint_m2: float
+    poses: int
+    memory_bytes: float
+    seconds: float
+    workers: int
+    queries: int = 0
+
+    def describe(self) -> str:
+        text = (f"up to about {self.poses:,} camera poses ({self.footprint_m2:.0f} m^2 footprint), "
+                f"{_gib(self.memory_bytes)} of memory and {_duration(self.seconds)} on {self.workers} worker(s)")
+        if self.queries:
+            text += f" including {self.queries:,} test-image localizations"
+        return text
+
+
+def _gib(b: float) -> str:
+    return f"{b / 2**30:.1f} GiB"
+
+
+def _duration(s: float) -> str:
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 5400:
+        return f"{s / 60:.0f} min"
+    return f"{s / 3600:.1f} h"
+
+
+def machine_memory_bytes() -> float:
+    """Physical memory of this machine, or the cgroup limit when lower (bytes)."""
+    try:
+        total = float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        total = 8 * 2**30
+    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(limit_file).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and 0 < int(text) < total:
+            total = float(int(text))
+    return total
+
+
+def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0) -> RunEstimate:
+    """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
+
+    Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
+    by ``grid_spacing^2``, times the yaws (an upper bound: walls and furniture take space).
+    Memory and time use the per-pose costs measured on the reference machine (module
+    constants). ``evaluate`` adds a map re-render per placement with markers and one
+    localization per test image, test set and placement.
+    """
+    from .workers import default_workers
+
+    d = plan_config.discretize
+    lo, hi = scene.bounds
+    w = max(float(hi[0] - lo[0]) - 2 * d.clearance, 0.0)
+    h = max(float(hi[1] - lo[1]) - 2 * d.clearance, 0.0)
+    footprint = w * h
+    locations = (math.floor(w / d.grid_spacing) + 1) * (math.floor(h / d.grid_spacing) + 1) if footprint > 0 else 1
+    poses = int(locations * d.num_yaws)
+    workers = default_workers(plan_config.observe.workers)
+    cells = (float(hi[0] - lo[0]) / _CELL + 20) * (float(hi[1] - lo[1]) / _CELL + 20)
+    memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
+    core_seconds = poses * SECONDS_PER_POSE_CORE
+    queries = 0
+    if evaluate_config is not None:
+        ks, methods = len(evaluate_config.ks), set(evaluate_config.methods)
+        with_markers = (ks if "omp" in methods else 0) + evaluate_config.runs * ks * len(methods & {"random", "uniform"}) \
+            + extra_placements
+        placements = with_markers + (1 if "none" in methods else 0)
+        queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
+        core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
+            + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE
+    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries)
+
+
+def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
+                   memory_bytes: float | None = None) -> None:
+    """Refuse a run over ``limits`` (unless ``force``), naming the numbers and the flag.
+
+    Raises:
+        UserError: estimated poses over ``max_poses``, time over ``max_hours`` or memory over
+            ``memory_fraction`` of ``memory_bytes`` (default: :func:`machine_memory_bytes`).
+    """
+    total = machine_memory_bytes() if memory_bytes is None else memory_bytes
+    reasons = []
+    if estimate.poses > limits.max_poses:
+        reasons.append(f"more than {limits.max_poses:,} poses")
+    if estimate.memory_bytes > limits.memory_fraction * total:
+        reasons.append(f"more memory than this machine has ({_gib(total)})")
+    if estimate.seconds > limits.max_hours * 3600:
+        reasons.append(f"longer than {limits.max_hours:g} h")
+    if not reasons:
+        log.info("run size: %s", estimate.describe())
+        return
+    if force:
+        log.warning("run size: %s (%s); going on because of --force", estimate.describe(), " and ".join(reasons))
+        return
+    raise UserError(f"this run needs {estimate.describe()}: {' and '.join(reasons)}; increase --grid-spacing or "
+                    f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway")
