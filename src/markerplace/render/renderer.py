@@ -13,6 +13,14 @@ colour; meshes are de-indexed so parts without normals get exact flat face norma
 extra textured quads (tag image with white quiet zone, nearest-neighbour magnification) lifted
 ``MARKER_OFFSET`` metres off the wall along their normal; :meth:`Renderer.set_markers` replaces
 them without touching the scene buffers.
+
+Transparent parts (``MeshPart.transparent``, glass) are drawn after everything opaque, far to
+near by part centroid, alpha-blended into the RGB image only (opacity
+:func:`~markerplace.scene.transparency.drawn_alpha`, about 0.3) with the depth test on and
+depth writes off. Depth and normals are therefore those of what lies behind the glass, as a
+time-of-flight or stereo depth camera mostly reports through clear glass, and the colour shows
+that surface tinted by the glass; glass seen with nothing behind it blends over black with depth
+0. Outputs without RGB skip the glass pass.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import numpy as np
 from ..errors import UserError
 from ..geometry import Intrinsics, invert
 from ..markers import Marker
+from ..scene.transparency import OPAQUE_ALPHA, drawn_alpha
 from ..scene.types import MeshPart, Scene
 from . import shaders
 from .tags import outer_size, tag_image
@@ -122,6 +131,9 @@ def _triangles(part: MeshPart) -> np.ndarray:
         col = np.asarray(part.colors, dtype=np.float64)[corner] / 255.0 * base
     else:
         col = np.broadcast_to(base, (len(corner), 4))
+    if part.transparent:  # glass: its opacity, at most about 0.3 unless its colour says less
+        col = np.array(col)
+        col[:, 3] = np.where((col[:, 3] > 0) & (col[:, 3] < OPAQUE_ALPHA), col[:, 3], drawn_alpha(1.0))
     out["color"] = np.round(col * 255.0).astype(np.uint8)
     return out
 
@@ -198,28 +210,46 @@ class Renderer:
         self._fbos: dict = {}
         self._vaos: dict = {}
 
-        # Scene: one interleaved vertex buffer per distinct texture object (None = untextured).
+        # Scene: one interleaved vertex buffer per distinct texture object (None = untextured);
+        # transparent parts get a buffer each, drawn last (see the module docstring).
         groups: dict[int, list] = {}
         textures: dict[int, np.ndarray | None] = {}
+        glass: list[tuple[int, np.ndarray]] = []
         for part in self.scene.parts:
             if len(part.faces) == 0:
                 continue
             key = id(part.texture) if (part.texture is not None and part.uv is not None) else 0
             textures[key] = part.texture if key else None
-            groups.setdefault(key, []).append(_triangles(part))
+            if part.transparent:
+                glass.append((key, _triangles(part)))
+            else:
+                groups.setdefault(key, []).append(_triangles(part))
+        uploaded: dict[int, object] = {0: self._white}
+
+        def texture_of(key: int):
+            if key not in uploaded:
+                uploaded[key] = self._upload_texture(textures[key])
+            return uploaded[key]
+
         self._scene_draws = []  # (texture, vbo, n_vertices)
         for key, chunks in groups.items():
             data = np.concatenate(chunks)
-            tex = self._upload_texture(textures[key]) if key else self._white
-            self._scene_draws.append((tex, ctx.buffer(data.tobytes()), len(data)))
+            self._scene_draws.append((texture_of(key), ctx.buffer(data.tobytes()), len(data)))
+        self._glass_draws = []  # (texture, vbo, n_vertices, (3,) centroid)
+        for key, data in glass:
+            centroid = data["pos"].astype(np.float64).mean(axis=0)
+            self._glass_draws.append((texture_of(key), ctx.buffer(data.tobytes()), len(data), centroid))
+        self._glass_fbo = ctx.framebuffer(color_attachments=[self._tex_rgb], depth_attachment=self._zbuf)
+        self._glass_fbo.depth_mask = False
         self._tag_textures: dict[int, object] = {}
         self._marker_draws: list = []
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE)
         log.debug(
-            "renderer: %d triangles in %d buffers, %dx%d, GL %s",
+            "renderer: %d triangles in %d buffers (%d transparent), %dx%d, GL %s",
             self.scene.num_faces if self.scene.parts else 0,
-            len(self._scene_draws),
+            len(self._scene_draws) + len(self._glass_draws),
+            len(self._glass_draws),
             W,
             H,
             ctx.info.get("GL_RENDERER", "?"),
@@ -276,14 +306,14 @@ class Renderer:
             self._marker_draws.append((self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
         self.markers = tuple(markers)
 
-    def _program(self, outputs: tuple[bool, bool, bool]):
-        prog = self._programs.get(outputs)
+    def _program(self, outputs: tuple[bool, bool, bool], alpha: bool = False):
+        prog = self._programs.get((outputs, alpha))
         if prog is None:
-            prog = self.ctx.program(vertex_shader=shaders.VERTEX, fragment_shader=shaders.fragment(*outputs))
+            prog = self.ctx.program(vertex_shader=shaders.VERTEX, fragment_shader=shaders.fragment(*outputs, alpha=alpha))
             prog["proj"].write(self._proj.T.tobytes())
             if "tex" in prog:
                 prog["tex"].value = 0
-            self._programs[outputs] = prog
+            self._programs[(outputs, alpha)] = prog
         return prog
 
     def _fbo(self, outputs: tuple[bool, bool, bool]):
@@ -347,6 +377,8 @@ class Renderer:
                 if outputs[0]:
                     tex.use(0)
                 self._vao(kind, i, vbo, prog, outputs).render(vertices=n)
+        if outputs[0] and self._glass_draws:
+            self._draw_glass(T)
         W, H = self._size
         att = 0
         out_rgb = out_depth = out_normal = None
@@ -362,6 +394,27 @@ class Renderer:
             out_normal = np.empty((H, W, 3), np.float32)
             fbo.read_into(out_normal, components=3, attachment=att, dtype="f4")
         return RenderResult(out_rgb, out_depth, out_normal, T.copy())
+
+    def _draw_glass(self, world_from_cam: np.ndarray) -> None:
+        """Blend the transparent parts into the RGB attachment, far to near, without depth writes."""
+        import moderngl
+
+        ctx = self.ctx
+        prog = self._program((True, False, False), alpha=True)
+        prog["cam_from_world"].write(invert(world_from_cam).astype("f4").T.tobytes())
+        prog["cam_pos"].value = tuple(float(v) for v in world_from_cam[:3, 3])
+        self._glass_fbo.use()
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        try:
+            eye = world_from_cam[:3, 3]
+            order = sorted(range(len(self._glass_draws)), key=lambda i: -float(np.linalg.norm(self._glass_draws[i][3] - eye)))
+            for i in order:
+                tex, vbo, n, _ = self._glass_draws[i]
+                tex.use(0)
+                self._vao("glass", i, vbo, prog, ("alpha",)).render(vertices=n)
+        finally:
+            ctx.disable(moderngl.BLEND)
 
     def render_batch(self, poses: Iterable[np.ndarray], **outputs: bool) -> Iterator[RenderResult]:
         """Render each (4, 4) ``world_from_cam`` of ``poses`` in turn (same flags as :meth:`render`)."""

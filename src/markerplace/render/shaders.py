@@ -42,11 +42,13 @@ AMBIENT = 0.6
 HEADLIGHT = 0.4
 
 
-def fragment(rgb: bool, depth: bool, normal: bool) -> str:
+def fragment(rgb: bool, depth: bool, normal: bool, alpha: bool = False) -> str:
     """Fragment shader writing the requested outputs to consecutive colour attachments.
 
     Attachment order: rgb (RGBA8) if requested, then depth (R32F) if requested, then the world
-    normal (RGBA32F, xyz = unit normal facing the camera) if requested.
+    normal (RGBA32F, xyz = unit normal facing the camera) if requested. With ``alpha`` the rgb
+    output carries the surface's opacity (vertex colour alpha x texture alpha) for blending
+    (transparent parts); otherwise its alpha is 1.
     """
     outs, body, loc = [], [], 0
     need_n = rgb or normal
@@ -58,7 +60,7 @@ def fragment(rgb: bool, depth: bool, normal: bool) -> str:
     if rgb:
         outs.append(f"layout(location = {loc}) out vec4 out_rgb;")
         body.append("vec4 albedo = v_color * texture(tex, v_uv);")
-        body.append(f"out_rgb = vec4(albedo.rgb * ({AMBIENT} + {HEADLIGHT} * c), 1.0);")
+        body.append(f"out_rgb = vec4(albedo.rgb * ({AMBIENT} + {HEADLIGHT} * c), {'albedo.a' if alpha else '1.0'});")
         loc += 1
     if depth:
         outs.append(f"layout(location = {loc}) out float out_depth;")
