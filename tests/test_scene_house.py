@@ -201,3 +201,36 @@ def test_render_through_the_glass_wall_shows_the_room_behind(house):
     # the colour is the room behind, tinted: it differs from the opaque pane and has texture
     assert np.abs(seen.rgb[200:250, 280:320].astype(int) - blocked.rgb[200:250, 280:320]).mean() > 10
     assert seen.rgb[150:300, 200:400].std() > 10
+
+
+def test_procedural_step_towards_a_sunken_room_on_either_side_and_floor_holes():
+    """The building blocks the house uses: a step on the lower room's side (here +x), walls down
+    to the lower floor, no lintel over a full-height opening, and a floor hole."""
+    from markerplace.scene.layout import Door, Layout, RoomSpec
+    from markerplace.scene.procedural import build_scene, subtract_rects
+
+    hole = (0.5, 0.5, 1.5, 2.0)
+    layout = Layout(
+        "steps", "test",
+        (RoomSpec("high", (0.0, 0.0, 3.0, 3.0), lights=0, floor_holes=(hole,)),
+         RoomSpec("low", (3.0, 0.0, 6.0, 3.0), lights=0, floor_dz=-0.25)),
+        doors=(Door("high", "low", width=2.0, height=5.0),),
+        floor_z=1.0,
+    )
+    scene = build_scene(layout)
+    assert [r.floor_z for r in scene.rooms] == [1.0, 0.75] and scene.floor_z == 1.0
+    caster = RayCaster(*scene.geometry())
+    west = np.array([-1.0, 0, 0])
+    # riser flush with the low room's wall face (x = 3.05), in the opening and beside it (wall)
+    for y in (1.5, 0.3, 2.7):
+        assert _cast(caster, [[4.0, y, 0.85]], west)[0] == pytest.approx(0.95, abs=1e-3), y
+    # above the step: open in the opening at every height (no lintel), wall beside it
+    for z in (1.1, 2.5, 3.6):
+        assert _cast(caster, [[4.0, 1.5, z]], west)[0] > 3.5, z
+        assert _cast(caster, [[4.0, 0.3, z]], west)[0] == pytest.approx(0.95, abs=1e-3), z
+    # the step's top continues the high floor to the riser; the hole goes through the floor
+    assert 2.0 - _cast(caster, [[3.03, 1.5, 2.0]], DOWN)[0] == pytest.approx(1.0, abs=1e-3)
+    assert _cast(caster, [[1.0, 1.0, 2.0]], DOWN)[0] == np.inf
+    assert 2.0 - _cast(caster, [[1.0, 2.5, 2.0]], DOWN)[0] == pytest.approx(1.0, abs=1e-3)
+    pieces = subtract_rects((0.0, 0.0, 3.0, 3.0), [hole])
+    assert sum((p[2] - p[0]) * (p[3] - p[1]) for p in pieces) == pytest.approx(9.0 - 1.5)
