@@ -90,7 +90,7 @@ class DiscretizeConfig:
     scan_rays: int = 720
     max_scan_range: float = 10.0
     resolution: float = 0.05
-    slice_offsets: tuple[float, ...] = (-0.5, 0.0, 0.25)
+    slice_offsets: tuple[float, ...] = (-0.3, 0.0, 0.25)
     passage_radius: float = 0.2
     min_region_area: float = 2.0
     floor: FloorConfig = field(default_factory=FloorConfig)
@@ -306,7 +306,7 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
         space = free_space(grid, support, obstacle, passage_radius=cfg.passage_radius,
                            min_region_area=cfg.min_region_area, start=here)
         xy, z = camera_locations(grid, floor, space.free, grid_spacing=cfg.grid_spacing,
-                                 clearance=cfg.clearance, height=cfg.height)
+                                 clearance=cfg.clearance, height=cfg.height, rc=rc)
         spaces.append((s, floor, support & ~obstacle, space, xy, z))
     if sum(len(t[4]) for t in spaces) == 0:
         eyes = ", ".join(f"{storeys[t[0]] + cfg.height:.2f}" for t in per_storey) or "?"

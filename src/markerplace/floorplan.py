@@ -68,8 +68,9 @@ class Grid:
 
     @classmethod
     def covering(cls, lo: np.ndarray, hi: np.ndarray, res: float, margin: float = 0.5) -> "Grid":
-        """The grid of cell size ``res`` covering the xy box [lo, hi] plus ``margin`` metres."""
-        lo = np.asarray(lo, dtype=float)[:2] - margin
+        """The grid of cell size ``res`` covering the xy box [lo, hi] plus ``margin`` metres,
+        its corner on a multiple of ``res`` (two models of one building share cells)."""
+        lo = np.floor((np.asarray(lo, dtype=float)[:2] - margin) / res) * res
         hi = np.asarray(hi, dtype=float)[:2] + margin
         return cls(float(lo[0]), float(lo[1]), float(res), int(np.ceil((hi[1] - lo[1]) / res)),
                    int(np.ceil((hi[0] - lo[0]) / res)))

@@ -168,19 +168,23 @@ def _grow_labels(lab: np.ndarray, radius_cells: float, within: np.ndarray) -> np
 
 
 def camera_locations(grid: Grid, floor: StoreyFloor, free: np.ndarray, *, grid_spacing: float,
-                     clearance: float, height: float, stand_radius: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """Camera locations of a storey: (L, 2) world xy on the ``grid_spacing`` lattice and (L,) z.
+                     clearance: float, height: float, stand_radius: float = 0.1, rc=None,
+                     floor_tol: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Camera locations of a storey: (L, 2) world xy on the lattice ``(i + 1/2) grid_spacing``, (L,) z.
 
     A location is a lattice point in ``free`` with standable floor (``floor.mask``: not a
-    table) within ``stand_radius`` around it, at least ``clearance`` metres from non-free cells, with headroom above ``height``
+    table) within ``stand_radius`` around it, at least ``clearance`` metres from non-free cells,
+    and, with the ray engine ``rc``, its floor straight below (within ``floor_tol``: no thin
+    furniture part between grid rays), with headroom above ``height``
     + 0.1 m; its z is its local floor plus ``height``.
     Ordered row-major (y, then x).
     """
     from scipy.ndimage import distance_transform_edt
 
-    W_m, H_m = grid.W * grid.res, grid.H * grid.res
-    nx, ny = int(np.floor(W_m / grid_spacing)), int(np.floor(H_m / grid_spacing))
-    gx, gy = np.meshgrid(grid.x0 + (np.arange(nx) + 0.5) * grid_spacing, grid.y0 + (np.arange(ny) + 0.5) * grid_spacing)
+    # lattice anchored at the world origin, (i + 1/2) * grid_spacing: the same for any model of the building
+    i0, i1 = np.floor(grid.x0 / grid_spacing - 0.5), np.ceil((grid.x0 + grid.W * grid.res) / grid_spacing - 0.5)
+    j0, j1 = np.floor(grid.y0 / grid_spacing - 0.5), np.ceil((grid.y0 + grid.H * grid.res) / grid_spacing - 0.5)
+    gx, gy = np.meshgrid((np.arange(i0, i1 + 1) + 0.5) * grid_spacing, (np.arange(j0, j1 + 1) + 0.5) * grid_spacing)
     pts = np.column_stack([gx.ravel(), gy.ravel()])
     clear = distance_transform_edt(free) * grid.res
     stand = distance_transform_edt(floor.mask) * grid.res  # room for the person's feet
@@ -189,4 +193,8 @@ def camera_locations(grid: Grid, floor: StoreyFloor, free: np.ndarray, *, grid_s
           & (floor.headroom[r, c] >= height + 0.1))
     pts, r, c = pts[ok], r[ok], c[ok]
     z = floor.height[r, c].astype(np.float64) + height
+    if rc is not None and len(pts):  # exactly below the camera, its floor (no thin furniture part)
+        t, _ = rc.first_hits(np.column_stack([pts, z]), np.tile([0.0, 0.0, -1.0], (len(pts), 1)), height + 1.0)
+        on_floor = np.abs(t - height) <= floor_tol
+        pts, z = pts[on_floor], z[on_floor]
     return pts, z

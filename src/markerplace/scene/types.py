@@ -28,8 +28,9 @@ class MeshPart:
         base_color: (4,) float RGBA in [0, 1], multiplied with texture / vertex colour.
         normals: (N, 3) float32 unit vertex normals, or None (renderer then uses face normals).
         transparent: glass or another see-through material (glTF ``alphaMode`` BLEND with
-            alpha < 1 or ``KHR_materials_transmission``; OBJ ``d`` < 1 or ``Tr`` > 0). It still
-            bounds free space (nobody walks through glass) but never carries a tag.
+            alpha < 0.9 or ``KHR_materials_transmission``; OBJ ``d`` < 0.9 or ``Tr`` > 0.1; see
+            :mod:`markerplace.scene.transparency`). It still bounds free space (nobody walks
+            through glass) but never carries a tag.
     """
 
     name: str
