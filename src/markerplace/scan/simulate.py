@@ -444,6 +444,60 @@ def _glass_scene(scene: Scene) -> Scene | None:
 
 
 # --------------------------------------------------------------------------------------- scan
+class FrameSimulator:
+    """Renders noisy RGB-D frames of one scene (one GL context; two when the scene has glass).
+
+    Use as a context manager or call :meth:`close`.
+
+    Args:
+        scene: the scene (world z up, metres).
+        config: camera and noise settings (``config.walk`` and ``config.fuse`` are not used).
+    """
+
+    def __init__(self, scene: Scene, config: ScanConfig = ScanConfig()):
+        from ..render.renderer import Renderer
+
+        self.config = config
+        self.intrinsics = config.intrinsics
+        self._rays = _camera_rays(self.intrinsics)
+        glass_scene = _glass_scene(scene)
+        if glass_scene is not None:
+            log.info("scan: %d transparent parts give no depth where they are the first surface", len(glass_scene.parts))
+        self._renderer = Renderer(scene, self.intrinsics)
+        self._glass = None
+        try:
+            self._glass = Renderer(glass_scene, self.intrinsics) if glass_scene is not None else None
+        except Exception:
+            self._renderer.close()
+            raise
+
+    def frame(self, world_from_cam: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """One frame at a (4, 4) ``world_from_cam``.
+
+        Returns:
+            rgb (H, W, 3) uint8 and depth (H, W) uint16 millimetres (0 = no reading), planar.
+        """
+        res = self._renderer.render(world_from_cam)
+        glass = None
+        if self._glass is not None:
+            dg = self._glass.render(world_from_cam, rgb=False, normal=False).depth
+            glass = (dg > 0) & (np.abs(dg - res.depth) <= 1e-3 + 1e-4 * dg)
+        d = noisy_depth(res.depth, res.normal, self.intrinsics, world_from_cam, rng, self.config.noise, glass, self._rays)
+        return res.rgb, to_depth_png(d, DEPTH_SCALE)
+
+    def close(self) -> None:
+        """Release the GL contexts."""
+        self._renderer.close()
+        if self._glass is not None:
+            self._glass.close()
+
+    def __enter__(self) -> "FrameSimulator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0,
                   keep_frames: str | Path | None = None, progress: bool = True) -> ScanResult:
     """Walk through ``scene``, render noisy RGB-D frames and fuse them into a mesh.
@@ -461,39 +515,24 @@ def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0
     """
     from tqdm import tqdm
 
-    from ..render.renderer import Renderer
     from .frames import FrameWriter
 
     t0 = time.perf_counter()
     config.fuse.validate()
     intr = config.intrinsics
     poses, positions, doorways = plan_walk(scene, config.walk, seed)
-    rays = _camera_rays(intr)
     fusion = TSDFFusion(intr, config.fuse)
-    glass_scene = _glass_scene(scene)
-    if glass_scene is not None:
-        log.info("scan: %d transparent parts give no depth where they are the first surface", len(glass_scene.parts))
     writer = FrameWriter(keep_frames, intr, DEPTH_SCALE) if keep_frames is not None else None
     valid_sum = 0.0
-    renderer = Renderer(scene, intr)
-    glass_renderer = Renderer(glass_scene, intr) if glass_scene is not None else None
     try:
-        for i, T in enumerate(tqdm(poses, desc="scan", unit="frame", disable=not progress, leave=False)):
-            res = renderer.render(T)
-            glass = None
-            if glass_renderer is not None:
-                dg = glass_renderer.render(T, rgb=False, normal=False).depth
-                glass = (dg > 0) & (np.abs(dg - res.depth) <= 1e-3 + 1e-4 * dg)
-            d = noisy_depth(res.depth, res.normal, intr, T, _rng(seed, 2, i), config.noise, glass, rays)
-            d16 = to_depth_png(d)
-            valid_sum += float(np.count_nonzero(d16)) / d16.size
-            fusion.integrate(res.rgb, d16, DEPTH_SCALE, T)
-            if writer is not None:
-                writer.write(f"{i:06d}", res.rgb, d16, T)
+        with FrameSimulator(scene, config) as sim:
+            for i, T in enumerate(tqdm(poses, desc="scan", unit="frame", disable=not progress, leave=False)):
+                rgb, d16 = sim.frame(T, _rng(seed, 2, i))
+                valid_sum += float(np.count_nonzero(d16)) / d16.size
+                fusion.integrate(rgb, d16, DEPTH_SCALE, T)
+                if writer is not None:
+                    writer.write(f"{i:06d}", rgb, d16, T)
     finally:
-        renderer.close()
-        if glass_renderer is not None:
-            glass_renderer.close()
         if writer is not None:
             writer.close()
     mesh = fusion.extract_mesh()
@@ -524,5 +563,5 @@ def distance_to_scene(points: np.ndarray, scene: Scene) -> np.ndarray:
     return rs.compute_distance(q).numpy().astype(np.float64)
 
 
-__all__ = ["WalkConfig", "DepthNoiseConfig", "ScanConfig", "ScanResult", "plan_walk", "find_doorways",
+__all__ = ["WalkConfig", "DepthNoiseConfig", "ScanConfig", "ScanResult", "FrameSimulator", "plan_walk", "find_doorways",
            "noisy_depth", "simulate_scan", "distance_to_scene", "world_from_cam_ypr", "to_depth_png"]
