@@ -119,13 +119,19 @@ SHIFT = Bound("--shift", 0.0, 5.0, "m", "a distance in [0, 5] metres, e.g. 0.1")
 COORDINATE = Bound("coordinate", -1e7, 1e7, "m", "world coordinates in metres")
 YAW_DEG = Bound("yaw", -1e6, 1e6, "deg", "a yaw in degrees")
 
+VOXEL = Bound("--voxel", 0.001, 1.0, "m", "a TSDF voxel edge in metres, e.g. 0.02")
+DEPTH_MAX = Bound("--depth-max", 0.1, 100.0, "m", "a depth cut-off in metres, e.g. 4")
+EVERY = Bound("--every", 1, 1_000_000, "", "use every N-th frame, e.g. 1", integer=True)
+MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 0.02")
+
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
 _PLAN_OPTIONS = {**_SCENE_OPTIONS, "v": V, "tag_size": TAG_SIZE, "height": PLANE_HEIGHT, "level": LEVEL,
                  "grid_spacing": GRID_SPACING, "clearance": CLEARANCE, "yaws": YAWS, "marker_spacing": MARKER_SPACING,
                  "placement_seed": PLACEMENT_SEED, "workers": WORKERS}
 
 BOUNDS: dict[str, dict[str, Bound]] = {
-    "scene export": {"seed": SEED},
+    "scene export": {"seed": SEED, "voxel": VOXEL},
+    "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
     "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
     "plan": {**_PLAN_OPTIONS, "k": K},
     "evaluate": {**_PLAN_OPTIONS, "tests": TESTS, "runs": RUNS, "test_seed": TEST_SEED, "tag_scale": TAG_SCALE,

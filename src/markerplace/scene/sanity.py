@@ -92,12 +92,10 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
 
 def recentre_offset(lo: np.ndarray, hi: np.ndarray, distance: float = RECENTRE_DISTANCE_M) -> np.ndarray:
     """(3,) whole-metre offset to subtract from world coordinates (float64) so the model's
-    bounding box [lo, hi] is centred near the origin; zeros when it already is (centre within
-    ``distance`` metres on every axis)."""
+    bounding box [lo, hi] is centred near the origin on every axis whose centre lies more than
+    ``distance`` metres out (zero on the other axes)."""
     centre = 0.5 * (np.asarray(lo, dtype=np.float64) + np.asarray(hi, dtype=np.float64))
-    if np.all(np.abs(centre) <= distance):
-        return np.zeros(3)
-    return np.round(centre)
+    return np.where(np.abs(centre) > distance, np.round(centre), 0.0)
 
 
 # --- up axis -----------------------------------------------------------------------------------------
@@ -197,7 +195,8 @@ def missing_textures(path: Path) -> list[str]:
             doc = json.loads(path.read_text(encoding="utf-8"))
             for image in doc.get("images", []) or []:
                 uri = image.get("uri") if isinstance(image, dict) else None
-                if isinstance(uri, str) and not uri.startswith("data:") and not (path.parent / unquote(uri)).is_file():
+                if isinstance(uri, str) and not uri.startswith("data:") and not (
+                        (path.parent / uri).is_file() or (path.parent / unquote(uri)).is_file()):
                     missing.append(uri)
         elif ext == ".obj":
             for mtl in _obj_material_libraries(path):
