@@ -32,7 +32,8 @@ model, per frame, from these sources:
   depth discontinuities (a jump over 5 % of the depth to a neighbour, dilated by one pixel),
   random speckle (small discs), nothing nearer than 0.4 m or beyond 5 m, and no reading on glass
   (parts with ``MeshPart.transparent`` that are the first surface along the ray, found with a
-  second renderer that draws only the transparent parts).
+  second renderer that draws only the transparent parts, opaque; the main renderer's depth is
+  what lies behind glass, which ``glass_dropout=False`` keeps).
 
 The colour image is the renderer's, registered to the depth. Frames can be kept on disk in the
 markerplace layout (:mod:`markerplace.scan.frames`), so ``markerplace fuse`` reproduces the mesh.
@@ -40,6 +41,7 @@ markerplace layout (:mod:`markerplace.scan.frames`), so ``markerplace fuse`` rep
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -105,6 +107,8 @@ class DepthNoiseConfig:
             discontinuity (default 0.05); both sides and ``edge_dilate_px`` pixels around drop.
         speckle_rate, speckle_radius_px: seeds per pixel and radius of random dropout discs
             (default 1e-3, 2 px: about 1.3 % of the pixels).
+        glass_dropout: no reading where a transparent part is the first surface (default
+            True); False keeps the renderer's depth of what lies behind the glass.
     """
 
     min_range: float = 0.4
@@ -123,6 +127,7 @@ class DepthNoiseConfig:
     edge_dilate_px: int = 1
     speckle_rate: float = 1e-3
     speckle_radius_px: int = 2
+    glass_dropout: bool = True
 
 
 @dataclass(frozen=True)
@@ -437,7 +442,8 @@ def to_depth_png(depth_m: np.ndarray, scale: float = DEPTH_SCALE) -> np.ndarray:
 
 
 def _glass_scene(scene: Scene) -> Scene | None:
-    parts = tuple(p for p in scene.parts if p.transparent and len(p.faces))
+    """The transparent parts alone, made opaque so they write depth (None when there are none)."""
+    parts = tuple(dataclasses.replace(p, transparent=False) for p in scene.parts if p.transparent and len(p.faces))
     if not parts:
         return None
     return Scene(name=f"{scene.name}/glass", parts=parts, rooms=scene.rooms, floor_z=scene.floor_z, source=scene.source)
@@ -460,7 +466,7 @@ class FrameSimulator:
         self.config = config
         self.intrinsics = config.intrinsics
         self._rays = _camera_rays(self.intrinsics)
-        glass_scene = _glass_scene(scene)
+        glass_scene = _glass_scene(scene) if config.noise.glass_dropout else None
         if glass_scene is not None:
             log.info("scan: %d transparent parts give no depth where they are the first surface", len(glass_scene.parts))
         self._renderer = Renderer(scene, self.intrinsics)
@@ -477,11 +483,17 @@ class FrameSimulator:
         Returns:
             rgb (H, W, 3) uint8 and depth (H, W) uint16 millimetres (0 = no reading), planar.
         """
-        res = self._renderer.render(world_from_cam)
+        # two GL contexts live in this process when there is glass: make each current before use
+        # (a Renderer draws into whichever context is current)
+        with self._renderer.ctx:
+            res = self._renderer.render(world_from_cam)
         glass = None
         if self._glass is not None:
-            dg = self._glass.render(world_from_cam, rgb=False, normal=False).depth
-            glass = (dg > 0) & (np.abs(dg - res.depth) <= 1e-3 + 1e-4 * dg)
+            # the renderer's depth is what lies behind glass; glass is the first surface where
+            # the glass-only depth is nearer than that (or nothing lies behind it)
+            with self._glass.ctx:
+                dg = self._glass.render(world_from_cam, rgb=False, normal=False).depth
+            glass = (dg > 0) & ((res.depth == 0) | (dg < res.depth + 1e-3))
         d = noisy_depth(res.depth, res.normal, self.intrinsics, world_from_cam, rng, self.config.noise, glass, self._rays)
         return res.rgb, to_depth_png(d, DEPTH_SCALE)
 
