@@ -191,13 +191,11 @@ class StoreyFloor:
 def cast_columns(rc: RayCaster, grid: Grid, config: FloorConfig = FloorConfig(), batch: int = 1_000_000) -> Surfaces:
     """Standable surfaces under every cell centre of ``grid`` (see the module docstring).
 
-    Sides matter: going down a ray, a face seen on its front side is entered (a floor, a table
-    top), one seen from the back is left (a table's underside, a ceiling). A floor is seen from
-    the front with air above it, so the floor under a closed box (a wall, a cabinet) is not
-    standable. Meshes wound the other way round are read flipped; mixed windings (some scans)
-    cannot tell, and every side counts. The winding is voted by the area of near-horizontal
-    surfaces with headroom and something above them (a column's top surface may be a roof,
-    front side, or a bare ceiling, back side).
+    Either side of a face counts (a floor may be a single sheet wound either way). The winding
+    of the mesh is voted by the area of these surfaces that have something above them (a
+    column's top surface may be a roof, front side up, or a bare ceiling, back side up): floors
+    seen from the front mean ``up``, from the back ``flipped``, no clear majority ``mixed``.
+    :func:`eye_level_support` uses it to tell the inside of closed solids.
     """
     if rc.num_faces == 0:
         return Surfaces(grid, np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
@@ -220,26 +218,24 @@ def cast_columns(rc: RayCaster, grid: Grid, config: FloorConfig = FloorConfig(),
         same = np.r_[False, ray[1:] == ray[:-1]]
         head = np.where(same, np.r_[np.inf, z[:-1]], np.inf) - z
         nz = rc.face_normal[face, 2]
-        front = nz > 0
-        prev_front = same & np.r_[False, front[:-1]]
         cand = (np.abs(nz) >= config.min_floor_nz) & (head >= config.headroom)
-        parts.append((idx[ray[cand]], z[cand], head[cand], front[cand], prev_front[cand], same[cand]))
+        parts.append((idx[ray[cand]], z[cand], head[cand], nz[cand] > 0))
     if not parts:
         return Surfaces(grid, np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
-    cell, z, head, front, prev_front, has_prev = (np.concatenate(v) for v in zip(*parts))
+    cell, z, head, front = (np.concatenate(v) for v in zip(*parts))
     voters = np.isfinite(head)
     up = float(front[voters].mean()) if voters.any() else 1.0
     if up >= 0.8:
-        keep, orientation = front & ~(has_prev & prev_front), "up"
+        orientation = "up"
     elif up <= 0.2:
-        keep, orientation = ~front & ~(has_prev & ~prev_front), "flipped"
+        orientation = "flipped"
         log.warning("floors: face normals point into the solids (%.0f %% of floor area seen from the back); "
                     "reading the mesh with flipped normals", 100 * (1 - up))
     else:
-        keep, orientation = np.ones(len(front), bool), "mixed"
+        orientation = "mixed"
         log.warning("floors: face normals are inconsistent (%.0f %% of floor area seen from the front); "
-                    "closed furniture cannot be told from open floor", 100 * up)
-    return Surfaces(grid, cell[keep], z[keep], head[keep], orientation)
+                    "the inside of closed furniture cannot be told from open space", 100 * up)
+    return Surfaces(grid, cell, z, head, orientation)
 
 
 def _peaks(z: np.ndarray, cell_area: float, bin_w: float = 0.05, radius: float = 0.15) -> list[tuple[float, float]]:
@@ -457,7 +453,8 @@ def eye_level_support(rc: RayCaster, grid: Grid, floor: StoreyFloor, eye: float,
     Something (floor or furniture) lies below the eye-level plane ``eye`` within the storey
     (not the void of a scan hole or a lower storey); when the storey has ceilings, a ceiling
     lies above (closed by ``ceiling_hole_fill``); and the eye-level point is not inside a closed
-    solid (the first face above it is not seen from its back; skipped for ``mixed`` windings).
+    solid (at least four of six axis rays from it first hit a face from its back; skipped for
+    ``mixed`` windings).
     Cells under furniture are not standable but they are free at eye level, as in the paper's
     single cut: clearance is kept from walls, not from a desk.
     """
@@ -467,17 +464,33 @@ def eye_level_support(rc: RayCaster, grid: Grid, floor: StoreyFloor, eye: float,
     inside_solid = np.zeros(n, bool)
     lo = floor.floor_z - config.band
     sign = {"up": 1.0, "flipped": -1.0}.get(orientation, 0.0)
+    down, up = np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 1.0])
     for s in range(0, n, batch):
         idx = np.arange(s, min(n, s + batch))
         r, c = np.divmod(idx, grid.W)
         o = np.column_stack([grid.centres(r, c), np.full(len(idx), eye)])
-        t, _ = rc.first_hits(o, np.tile([0.0, 0.0, -1.0], (len(idx), 1)), eye - lo)
+        t, f_down = rc.first_hits(o, np.tile(down, (len(idx), 1)), eye - lo)
         below[idx] = np.isfinite(t)
-        t, f = rc.first_hits(o, np.tile([0.0, 0.0, 1.0], (len(idx), 1)), config.max_ceiling)
+        t, f_up = rc.first_hits(o, np.tile(up, (len(idx), 1)), config.max_ceiling)
         above[idx] = np.isfinite(t)
         if sign:
-            inside_solid[idx] = (f >= 0) & (sign * rc.face_normal[np.maximum(f, 0), 2] > 0.5)
-    support = below.reshape(grid.shape) & ~inside_solid.reshape(grid.shape)
+            # inside a closed solid every face around is seen from its back; one wrongly wound
+            # ceiling is not enough: ask six directions, inside when four or more say so
+            maybe = np.flatnonzero((f_up >= 0) & (sign * rc.face_normal[np.maximum(f_up, 0), 2] > 0))
+            if len(maybe):
+                inside_solid[idx[maybe]] = _back_votes(rc, o[maybe], sign) >= 4
+    support = below.reshape(grid.shape)
     if floor.ceilings:
         support &= _close(above.reshape(grid.shape), config.ceiling_hole_fill / grid.res)
-    return support | floor.mask
+    return (support | floor.mask) & ~inside_solid.reshape(grid.shape)
+
+
+def _back_votes(rc: RayCaster, points: np.ndarray, sign: float) -> np.ndarray:
+    """(M,) how many of six axis rays from each point first hit a face from its back side."""
+    votes = np.zeros(len(points), np.int64)
+    for d in np.vstack([np.eye(3), -np.eye(3)]):
+        _, f = rc.first_hits(points, np.tile(d, (len(points), 1)))
+        hit = f >= 0
+        votes[hit] += (sign * (rc.face_normal[f[hit]] @ d) > 0)
+    return votes
+
