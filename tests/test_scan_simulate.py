@@ -277,3 +277,34 @@ def test_keep_frames_must_be_a_new_folder(tmp_path, capsys):
     assert main(["--quiet", "scene", "export", "tiny", str(tmp_path / "o.ply"), "--as-scan", "--keep-frames",
                  str(tmp_path / "frames")]) == 2
     _one_line_error(capsys, "is not empty")
+
+
+@pytest.mark.slow
+def test_office_scan_size_accuracy_and_time(tmp_path):
+    """`scene export office OUT.ply --as-scan` (about 1 min on 2 cores): 1e5-1e6 faces, on the surface, floors covered."""
+    import time
+
+    import open3d as o3d
+
+    out = tmp_path / "office_scan.ply"
+    t0 = time.perf_counter()
+    assert main(["--quiet", "scene", "export", "office", str(out), "--as-scan"]) == 0
+    seconds = time.perf_counter() - t0
+    assert seconds < 300
+    office = load_scene("office")
+    scan = load_scene(str(out))
+    assert 100_000 < scan.num_faces < 1_000_000
+    V = np.asarray(scan.parts[0].vertices, dtype=float)
+    d = distance_to_scene(V, office)
+    assert np.sqrt(np.mean(d**2)) < 0.02 and np.median(d) < 0.005
+    caster = RayCaster(*office.geometry())
+    rs = o3d.t.geometry.RaycastingScene()
+    rs.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(scan.parts[0].faces.astype(np.uint32)))
+    for room in office.rooms:
+        x0, y0, x1, y1 = room.bounds
+        X, Y = np.meshgrid(np.arange(x0 + 0.1, x1 - 0.05, 0.1), np.arange(y0 + 0.1, y1 - 0.05, 0.1))
+        P = np.stack([X.ravel(), Y.ravel(), np.full(X.size, room.floor_z + 1.0)], axis=1)
+        t, _ = caster.first_hits(P, np.tile([0.0, 0.0, -1.0], (len(P), 1)))
+        floor = P[np.abs(t - 1.0) < 0.01] - [0.0, 0.0, 1.0]
+        near = rs.compute_distance(o3d.core.Tensor(floor.astype(np.float32))).numpy()
+        assert np.mean(near < 0.05) > 0.9, room.name

@@ -406,7 +406,7 @@ def load_frame(fs: FrameSet, rec: FrameRecord) -> tuple[np.ndarray, np.ndarray]:
     try:
         with Image.open(rec.color_path) as img:
             mode = img.mode
-            if mode not in ("RGB", "RGBA", "L", "P"):
+            if mode not in ("RGB", "RGBA", "L", "LA", "P"):
                 raise UserError(f"frame {rec.name}: colour image {rec.color_path} has mode {mode}; it must be 8-bit RGB")
             rgb = np.asarray(img.convert("RGB"))
     except UserError:
