@@ -18,6 +18,14 @@ FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 FAR = np.array([1.0e6, 2.0e6, 0.0])  # survey-like coordinates, world metres
 
 
+@pytest.fixture(autouse=True)
+def _fresh_warnings():
+    """Loader warnings are printed once per process; each test wants to see its own."""
+    from markerplace.scene import sanity
+
+    sanity._WARNED.clear()
+
+
 def _obj_from_scene(scene, path, transform=np.eye(4)):
     """Write a trimesh.Scene as OBJ + MTL + textures (material names made file-safe)."""
     from trimesh.exchange.obj import export_obj
@@ -139,6 +147,10 @@ def test_non_finite_vertices_are_dropped_with_a_count(meshes, tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         scene = load_scene(str(path))
     assert "dropped 3 of" in caplog.text and "NaN or infinite" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        load_scene(str(path))  # loaded again by the next stage: not warned twice
+    assert "dropped" not in caplog.text
     assert all(np.isfinite(p.vertices).all() for p in scene.parts)
     # what is left is exactly the clean model, so the plan is the clean model's plan
     assert cache.scene_hash(scene) == cache.scene_hash(load_scene(str(meshes["obj"])))

@@ -354,6 +354,10 @@ SECONDS_PER_QUERY_CORE = 0.1
 """Localizing one test image on one core (README, Results: room and office evaluations)."""
 
 
+LARGE_FOOTPRINT_M2 = 10_000.0
+"""A refused run over this footprint also suggests ``--unit-scale`` (a model in cm looks 10^4 x larger)."""
+
+
 @dataclass(frozen=True)
 class SizeLimits:
     """Largest run started without ``--force``.
@@ -481,5 +485,7 @@ def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimit
     if force:
         log.warning("run size: %s (%s); going on because of --force", estimate.describe(), " and ".join(reasons))
         return
+    units = ("; if the model is not in metres, pass --unit-scale (e.g. 0.01 for cm)"
+             if estimate.footprint_m2 > LARGE_FOOTPRINT_M2 else "")
     raise UserError(f"this run needs {estimate.describe()}: {' and '.join(reasons)}; increase --grid-spacing or "
-                    f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway")
+                    f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway{units}")

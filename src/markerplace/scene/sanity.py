@@ -26,6 +26,22 @@ from ..errors import UserError
 
 log = logging.getLogger("markerplace.scene.loader")
 
+_WARNED: set[str] = set()
+
+
+def _warn_once(message: str, *args) -> None:
+    """Log a warning once per process, and only in the main process: the scene is loaded again
+    by each stage and in every rendering worker, and the user needs to read it once."""
+    import multiprocessing
+
+    text = message % args if args else message
+    if multiprocessing.parent_process() is not None or text in _WARNED:
+        log.debug(text)
+        return
+    _WARNED.add(text)
+    log.warning(text)
+
+
 MAX_NON_FINITE_FRACTION = 0.05
 """A file with more than this fraction of NaN/inf vertices is refused, not repaired."""
 RECENTRE_DISTANCE_M = 1000.0
@@ -85,7 +101,7 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
         done.add(key)
         if len(mesh.faces) > 0 and np.all(np.isfinite(world_from_file @ file_from_mesh)):
             out.append((name, mesh, file_from_mesh))
-    log.warning("%s: dropped %d of %d vertices with NaN or infinite coordinates and the %d faces using them",
+    _warn_once("%s: dropped %d of %d vertices with NaN or infinite coordinates and the %d faces using them",
                 path, bad, total, dropped_faces)
     return out
 
@@ -176,7 +192,7 @@ def check_up_axis(scene, world_from_file_rotation: np.ndarray, up_choices: dict[
     suggestion = next((k for k, R in up_choices.items() if np.allclose(R @ file_axis, (0, 0, 1), atol=1e-6)), None)
     if suggestion is None:
         return None
-    log.warning("%s: read with --up %s, but its floor seems to face another way: %.0f m^2 of floor and furniture "
+    _warn_once("%s: read with --up %s, but its floor seems to face another way: %.0f m^2 of floor and furniture "
                 "face up with --up %s against %.0f m^2 as read; if the plan looks wrong, pass --up %s",
                 path, up_read, best_score, suggestion, max(current, 0.0), suggestion)
     return suggestion
@@ -230,6 +246,6 @@ def warn_missing_textures(path: Path) -> list[str]:
     missing = missing_textures(path)
     if missing:
         shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-        log.warning("%s: texture file(s) not found next to it: %s; the parts using them are drawn without texture",
+        _warn_once("%s: texture file(s) not found next to it: %s; the parts using them are drawn without texture",
                     path, shown)
     return missing

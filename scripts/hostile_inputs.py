@@ -1,0 +1,407 @@
+#!/usr/bin/env python
+"""Re-run the bad inputs of issue 13 as a new user would, through the real command line.
+
+Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged on how it ends:
+
+* ``error``: exit 2, one stderr line ``markerplace: error: ...`` (or argparse's usage + error)
+  containing the expected text;
+* ``warn``: exit 0 with the expected warning on stderr;
+* ``ok``: exit 0 (plus a check of the outputs where it matters);
+* ``interrupted``: exit 130 after SIGINT.
+
+Any traceback, any other exit code, a missing message or a failed output check is reported.
+Prints one line per case and a summary; writes ``hostile_inputs.md`` into the work folder.
+Takes about 5 minutes on 2 cores. Usage::
+
+    .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
+FAR = np.array([1.0e6, 2.0e6, 0.0])
+
+
+@dataclass
+class Case:
+    name: str
+    argv: list[str]
+    expect: str  # error | warn | ok | interrupted
+    text: str = ""
+    check: Callable[[], str | None] | None = None  # returns a problem or None
+    setup: Callable[[], None] | None = None
+    interrupt_after: float | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def cli(args: list[str], cwd: Path, timeout: float = 600, interrupt_after: float | None = None):
+    cmd = [sys.executable, "-m", "markerplace.cli", *args]
+    t0 = time.perf_counter()
+    if interrupt_after is None:
+        res = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=timeout)
+        return res.returncode, res.stdout, res.stderr, time.perf_counter() - t0
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
+    time.sleep(interrupt_after)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=timeout)
+    return proc.returncode, out, err, time.perf_counter() - t0
+
+
+def without_root_powers(args: list[str]) -> list[str]:
+    """argv prefix so that root cannot bypass file permissions (as an ordinary user)."""
+    if os.geteuid() == 0 and shutil.which("setpriv"):
+        return [shutil.which("setpriv"), "--inh-caps=-dac_override,-dac_read_search",
+                "--bounding-set=-dac_override,-dac_read_search", "--"]
+    return []
+
+
+# --- fixtures -------------------------------------------------------------------------------------
+
+def make_fixtures(w: Path) -> dict:
+    import trimesh
+    from trimesh.exchange.obj import export_obj
+
+    f: dict = {}
+    subprocess.run([sys.executable, "-m", "markerplace.cli", "scene", "export", "tiny", str(w / "tiny.glb")],
+                   check=True, capture_output=True)
+    f["glb"] = w / "tiny.glb"
+    s = trimesh.load(str(f["glb"]), force="scene", process=False)
+    for i, g in enumerate(s.geometry.values()):
+        if getattr(g.visual, "material", None) is not None:
+            g.visual.material.name = f"mat{i}"
+
+    def obj(folder: str, transform=np.eye(4)) -> Path:
+        d = w / folder
+        d.mkdir(exist_ok=True)
+        sc = s.copy()
+        sc.apply_transform(transform)
+        text, tex = export_obj(sc, include_texture=True, return_texture=True, digits=10)
+        (d / "tiny.obj").write_text(text)
+        for k, v in tex.items():
+            (d / k).write_bytes(v)
+        return d / "tiny.obj"
+
+    z_up = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
+    f["obj"] = obj("obj", z_up)
+    f["yup"] = obj("yup")
+    T = np.eye(4)
+    T[:3, :3] = 100.0 * np.eye(3)
+    f["cm"] = obj("cm", T @ z_up)
+    T[:3, :3] = 0.001 * np.eye(3)
+    f["tiny_mm"] = obj("mm", T @ z_up)
+    far = s.copy()
+    Tf = np.eye(4)
+    Tf[:3, 3] = [FAR[0], FAR[2], -FAR[1]]
+    far.apply_transform(Tf)
+    far.export(str(w / "tiny_far.glb"))
+    f["far"] = w / "tiny_far.glb"
+    nan = obj("nan", z_up)
+    text = nan.read_text()
+    n = sum(1 for line in text.splitlines() if line.startswith("v "))
+    nan.write_text(text + f"\no broken\nv nan 0 0\nv 1 inf 1\nv 2 2 -inf\nf {n + 1} {n + 2} {n + 3}\n")
+    f["nan"] = nan
+    (w / "mostly_nan.obj").write_text("v 0 0 0\nv 4 0 0\nv 4 4 0\nv 0 4 3\nv nan 1 1\nv 1 nan 1\n"
+                                      "f 1 2 3\nf 1 3 4\nf 1 5 6\n")
+    f["mostly_nan"] = w / "mostly_nan.obj"
+    latin = obj("latin1", z_up)
+    latin.write_bytes("# exporté, café, 3° étage\n".encode("latin-1") + latin.read_bytes())
+    f["latin1"] = latin
+    (w / "empty.obj").write_bytes(b"")
+    (w / "corrupt.glb").write_bytes(os.urandom(2000))
+    (w / "points.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                  "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n")
+    (w / "model.stl").write_text("solid x\nendsolid x\n")
+    (w / "dir.glb").mkdir(exist_ok=True)
+    gltf = w / "gltf"
+    gltf.mkdir(exist_ok=True)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_mesh_sanity import _gltf_with_texture_uri
+
+    f["gltf_missing"] = _gltf_with_texture_uri(gltf / "room.gltf", "textures/wall.png")
+    uni = w / "été ünïcode"
+    uni.mkdir(exist_ok=True)
+    shutil.copy(f["glb"], uni / "salle à manger.glb")
+    f["unicode"] = uni / "salle à manger.glb"
+    a_file = w / "a_file"
+    a_file.write_text("x")
+    f["a_file"] = a_file
+    ro = w / "read_only"
+    ro.mkdir(exist_ok=True)
+    (ro / "plan").mkdir(exist_ok=True)
+    for p in (ro / "plan", ro):
+        p.chmod(0o555)
+    f["ro"] = ro
+    (w / "view_dir_rgb.png").mkdir(exist_ok=True)
+    # a finished plan (caches, markers) to damage and reuse
+    res = subprocess.run([sys.executable, "-m", "markerplace.cli", "plan", "tiny", "-k", "2", "--out",
+                          str(w / "base_plan"), *FAST], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    f["base"] = w / "base_plan"
+    markers = json.loads((w / "base_plan" / "placement.json").read_text())["markers"]
+    f["markers"] = markers
+
+    def marker_file(name, entries):
+        p = w / name
+        p.write_text(json.dumps({"markers": entries}))
+        return p
+
+    f["existing_ok"] = marker_file("existing_ok.json", markers[:1])
+    f["existing_mid"] = marker_file("existing_mid.json", [{"tag_id": 7, "size": 0.4, "position": [1.8, 1.8, 1.5],
+                                                            "normal": [1, 0, 0]}])
+    f["existing_far"] = marker_file("existing_far.json", [{"tag_id": 8, "size": 0.4, "position": [500, 500, 1.5],
+                                                            "normal": [1, 0, 0]}])
+    flipped = dict(markers[0])
+    flipped.pop("world_from_marker")
+    flipped["normal"] = [-v for v in flipped["normal"]]
+    f["existing_flipped"] = marker_file("existing_flipped.json", [flipped])
+    (w / "existing_bad.json").write_text("{not json")
+    f["existing_bad"] = w / "existing_bad.json"
+    (w / "placements_empty").mkdir(exist_ok=True)
+    return f
+
+
+def damage(path: Path, how: str) -> Callable[[], None]:
+    def run():
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) // 2] if how == "truncate" else data[:16] + bytes(len(data) - 16))
+    return run
+
+
+def positions_far(out: Path) -> Callable[[], str | None]:
+    def check():
+        m = json.loads((out / "placement.json").read_text())["markers"]
+        p = np.array([x["position"] for x in m])
+        ok = np.all(np.abs(p[:, 0] - FAR[0]) < 10) and np.all(np.abs(p[:, 1] - FAR[1]) < 10)
+        return None if ok else f"positions not in file coordinates: {p.tolist()}"
+    return check
+
+
+def placement_exists(out: Path) -> Callable[[], str | None]:
+    return lambda: None if (out / "placement.json").is_file() else "no placement.json"
+
+
+# --- cases ------------------------------------------------------------------------------------------
+
+def cases(w: Path, f: dict) -> list[Case]:
+    o = lambda name: str(w / "out" / name)  # noqa: E731
+    plan = lambda scene, name, *extra: ["plan", str(scene), "-k", "2", "--out", o(name), *FAST, *extra]  # noqa: E731
+    ev = ["evaluate", "tiny", "--quiet"]
+    c: list[Case] = [
+        # scene files
+        Case("missing mesh file", plan("nope.glb", "s1"), "error", "no such file"),
+        Case("unknown extension", plan(w / "model.stl", "s2"), "error", "unknown scene format"),
+        Case("unknown built-in name", plan("offfice", "s3"), "error", "unknown scene"),
+        Case("empty OBJ", plan(w / "empty.obj", "s4"), "error", "no triangle faces"),
+        Case("corrupt GLB", plan(w / "corrupt.glb", "s5"), "error", "could not read"),
+        Case("point-cloud PLY", plan(w / "points.ply", "s6"), "error", "no triangle faces"),
+        Case("a folder named .glb", plan(w / "dir.glb", "s7"), "error", "no such file"),
+        Case("OBJ in cm without --unit-scale", plan(f["cm"], "s8"), "error", "pass --unit-scale (e.g. 0.01 for cm)"),
+        Case("OBJ in mm scaled to 3 mm", plan(f["tiny_mm"], "s9"), "error", "too small"),
+        Case("bad --up", plan(f["obj"], "s10", "--up", "w"), "error", "--up 'w' is not an axis"),
+        Case("OBJ with NaN/inf vertices", plan(f["nan"], "s11"), "warn", "dropped 3 of"),
+        Case("OBJ mostly NaN", plan(f["mostly_nan"], "s12"), "error", "NaN or infinite"),
+        Case("y-up OBJ read as z-up", plan(f["yup"], "s13"), "warn", "pass --up y"),
+        Case("y-up OBJ with --up y", plan(f["yup"], "s14", "--up", "y"), "ok", check=placement_exists(w / "out" / "s14")),
+        Case("GLB at 1e6 m (survey coordinates)", plan(f["far"], "s15"), "ok", check=positions_far(w / "out" / "s15")),
+        Case("OBJ with a Latin-1 comment", plan(f["latin1"], "s16"), "ok"),
+        Case(".gltf with a missing texture", ["render", str(f["gltf_missing"]), "--out", o("s17/v")], "warn",
+             "textures/wall.png"),
+        Case("non-ASCII path", ["render", str(f["unicode"]), "--out", o("été/vue")], "ok"),
+        Case("scene export of a mesh file (a conversion)", ["scene", "export", str(f["glb"]), o("s19.glb")], "ok"),
+        # numbers: plan
+        Case("--grid-spacing nan", plan("tiny", "n1", "--grid-spacing", "nan"), "error", "not a finite number"),
+        Case("--grid-spacing 1e-4", plan("tiny", "n2", "--grid-spacing", "1e-4"), "error", "outside [0.05, 50] m"),
+        Case("--grid-spacing 0.01", plan("tiny", "n3", "--grid-spacing", "0.01"), "error", "outside [0.05, 50] m"),
+        Case("--grid-spacing -1", plan("tiny", "n4", "--grid-spacing=-1"), "error", "outside"),
+        Case("--grid-spacing inf", plan("tiny", "n5", "--grid-spacing", "inf"), "error", "not a finite number"),
+        Case("--grid-spacing 0", plan("tiny", "n6", "--grid-spacing", "0"), "error", "--grid-spacing 0 m"),
+        Case("--marker-spacing nan", plan("tiny", "n7", "--marker-spacing", "nan"), "error", "not a finite number"),
+        Case("--marker-spacing 0", plan("tiny", "n8", "--marker-spacing", "0"), "error", "--marker-spacing"),
+        Case("--clearance -1", plan("tiny", "n9", "--clearance=-1"), "error", "--clearance"),
+        Case("--clearance nan", plan("tiny", "n10", "--clearance", "nan"), "error", "not a finite number"),
+        Case("--height nan", plan("tiny", "n11", "--height", "nan"), "error", "not a finite number"),
+        Case("--height 100", plan("tiny", "n12", "--height", "100"), "error", "--height 100 m is outside"),
+        Case("--yaws 0", plan("tiny", "n13", "--yaws", "0"), "error", "--yaws 0 must be at least 1"),
+        Case("--yaws 10^20", plan("tiny", "n14", "--yaws", "1" + "0" * 20), "error", "must be at most 360"),
+        Case("-k 0", plan("tiny", "n15", "-k", "0"), "error", "-k 0 must be at least 1"),
+        Case("-k 10^20", plan("tiny", "n16", "-k", "1" + "0" * 20), "error", "must be at most 10000"),
+        Case("-k 500 (more than candidates)", plan("tiny", "n17", "-k", "500"), "error", "candidate marker poses"),
+        Case("-v nan", plan("tiny", "n18", "-v", "nan"), "error", "not a finite number"),
+        Case("-v 150", plan("tiny", "n19", "-v", "150"), "error", "outside [0, 100]"),
+        Case("--tag-size 0", plan("tiny", "n20", "--tag-size", "0"), "error", "--tag-size 0 m is outside"),
+        Case("--tag-size nan", plan("tiny", "n21", "--tag-size", "nan"), "error", "not a finite number"),
+        Case("--level 99999", plan("tiny", "n22", "--level", "99999"), "error", "at most 1000"),
+        Case("--level 3 (one storey)", plan("tiny", "n23", "--level", "3"), "error", "--level"),
+        Case("--workers -1", plan("tiny", "n24", "--workers=-1"), "error", "--workers -1 must be at least 0"),
+        Case("--workers 100000", plan("tiny", "n25", "--workers", "100000"), "error", "at most 256"),
+        Case("--placement-seed -1", plan("tiny", "n26", "--placement-seed=-1", "--method", "random"), "error",
+             "must be at least 0"),
+        Case("--seed -1", plan("tiny", "n27", "--seed=-1"), "error", "--seed -1 must be at least 0"),
+        Case("--start nan,1", plan("tiny", "n28", "--start", "nan,1"), "error", "X = nan"),
+        Case("--start 1,2,3", plan("tiny", "n29", "--start", "1,2,3"), "error", "must be X,Y"),
+        Case("--start 100,100 (outside)", plan("tiny", "n30", "--start", "100,100"), "error", "--start"),
+        Case("--unit-scale nan", plan(f["obj"], "n31", "--unit-scale", "nan"), "error", "not a finite number"),
+        Case("--unit-scale 0", plan(f["obj"], "n32", "--unit-scale", "0"), "error", "--unit-scale 0 is outside"),
+        Case("size guard: office at 0.05 m", ["plan", "office", "--grid-spacing", "0.05", "--out", o("n33"), "--quiet"],
+             "error", "--force"),
+        # numbers: render
+        Case("render --pose nan,1,1.5,0", ["render", "tiny", "--pose", "nan,1,1.5,0", "--out", o("r1/v")], "error", "X = nan"),
+        Case("render --pose outside the model", ["render", "tiny", "--pose", "50,50,1.5,0", "--out", o("r2/v")], "error",
+             "outside the model"),
+        Case("render --pose with 3 numbers", ["render", "tiny", "--pose", "1,1,1.5", "--out", o("r3/v")], "error", "X,Y,Z,YAW_DEG"),
+        Case("render --pose yaw inf", ["render", "tiny", "--pose", "1,1,1.5,inf", "--out", o("r4/v")], "error", "YAW_DEG = inf"),
+        Case("render --width 0", ["render", "tiny", "--width", "0", "--out", o("r5/v")], "error", "--width 0"),
+        Case("render --width 100000", ["render", "tiny", "--width", "100000", "--out", o("r6/v")], "error", "at most 4096"),
+        Case("render --hfov 180", ["render", "tiny", "--hfov", "180", "--out", o("r7/v")], "error", "--hfov 180"),
+        Case("render --hfov nan", ["render", "tiny", "--hfov", "nan", "--out", o("r8/v")], "error", "not a finite number"),
+        # numbers and inputs: evaluate
+        Case("evaluate --tests 0", [*ev, "--out", o("e1"), "--tests", "0"], "error", "--tests 0 must be at least 1"),
+        Case("evaluate --tests nan", [*ev, "--out", o("e2"), "--tests", "nan"], "error", "invalid int value"),
+        Case("evaluate --k 5,a", [*ev, "--out", o("e3"), "--k", "5,a"], "error", "comma-separated list of integers"),
+        Case("evaluate --k 0", [*ev, "--out", o("e4"), "--k", "0"], "error", "--k 0 must be at least 1"),
+        Case("evaluate --tag-scale nan", [*ev, "--out", o("e5"), "--tag-scale", "nan"], "error", "not a finite number"),
+        Case("evaluate --shift -1", [*ev, "--out", o("e6"), "--shift=-1"], "error", "--shift -1 m is outside"),
+        Case("evaluate --runs 0", [*ev, "--out", o("e7"), "--runs", "0"], "error", "--runs 0"),
+        Case("evaluate --test-seed -1", [*ev, "--out", o("e8"), "--test-seed=-1"], "error", "must be at least 0"),
+        Case("evaluate --methods best", [*ev, "--out", o("e9"), "--methods", "best"], "error", "--methods"),
+        Case("evaluate --test-sets hard", [*ev, "--out", o("e10"), "--test-sets", "hard"], "error", "--test-sets"),
+        Case("evaluate --placements /nonexistent", [*ev, "--out", o("e11"), "--placements", "/nonexistent"], "error",
+             "is not a directory", extra={"max_seconds": 10}),
+        Case("evaluate --placements (empty folder)", [*ev, "--out", o("e12"), "--placements", str(w / "placements_empty")],
+             "error", "holds no placement.json", extra={"max_seconds": 10}),
+        # output folders
+        Case("plan --out an existing file", plan("tiny", "x", "--out", str(f["a_file"])), "error", "is an existing file"),
+        Case("plan --out under a file", plan("tiny", "x", "--out", str(f["a_file"] / "sub")), "error", "is a file"),
+        Case("plan --out read-only folder", plan("tiny", "x", "--out", str(f["ro"] / "plan")), "error",
+             "cannot write there", extra={"no_root": True}),
+        Case("render --out under a file", ["render", "tiny", "--out", str(f["a_file"] / "v")], "error", "is a file"),
+        Case("render --out in a read-only folder", ["render", "tiny", "--out", str(f["ro"] / "v")], "error",
+             "cannot write there", extra={"no_root": True}),
+        Case("render --out PREFIX_rgb.png is a folder", ["render", "tiny", "--out", str(w / "view_dir")], "error",
+             "is an existing folder"),
+        Case("scene export under a file", ["scene", "export", "tiny", str(f["a_file"] / "t.glb")], "error", "is a file"),
+        Case("scene export into a read-only folder", ["scene", "export", "tiny", str(f["ro"] / "t.glb")], "error",
+             "cannot write there", extra={"no_root": True}),
+        Case("scene export OUT is a folder", ["scene", "export", "tiny", str(w / "dir.glb")], "error", "is an existing folder"),
+        # --existing
+        Case("--existing from a plan", plan("tiny", "x1", "-k", "1", "--existing", str(f["existing_ok"])), "ok"),
+        Case("--existing in the middle of a room", plan("tiny", "x2", "--existing", str(f["existing_mid"])), "error",
+             "tag 7 at (1.80, 1.80, 1.50) is not on a wall"),
+        Case("--existing at (500, 500)", plan("tiny", "x3", "--existing", str(f["existing_far"])), "error",
+             "tag 8 at (500.00, 500.00, 1.50) is not on a wall"),
+        Case("--existing facing into the wall", plan("tiny", "x4", "--existing", str(f["existing_flipped"])), "error",
+             "faces into the wall"),
+        Case("--existing not JSON", plan("tiny", "x5", "--existing", str(f["existing_bad"])), "error", "not valid JSON"),
+    ]
+    base = f["base"]
+    base_args = ["plan", "tiny", "-k", "2", "--out", str(base), *FAST]
+    for art in ("observations.h5", "discretization.npz", "similarity.npz"):
+        for how in ("truncate", "garble"):
+            c.append(Case(f"{how}d {art}", base_args, "warn", f"{art} is not usable", setup=damage(base / art, how)))
+    c.append(Case("garbled .meta.json", base_args, "ok",
+                  setup=lambda: (base / "observations.h5.meta.json").write_text("{oops")))
+    c.append(Case("two plans into one folder at once", ["plan", "tiny", "-k", "2", "--out", o("conc"), *FAST], "ok",
+                  extra={"concurrent": 2}, check=placement_exists(w / "out" / "conc")))
+    room = ["plan", "room", "-k", "2", "--out", o("sig"), "--yaws", "4", "--workers", "1", "--quiet"]
+    c.append(Case("SIGINT during observe", room, "interrupted", "interrupted", interrupt_after=8.0))
+    c.append(Case("re-run after SIGINT resumes", room, "ok", check=placement_exists(w / "out" / "sig")))
+    return c
+
+
+def judge(case: Case, code: int, err: str, seconds: float) -> str | None:
+    if "Traceback" in err:
+        return "traceback"
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    if case.expect == "error":
+        if code != 2:
+            return f"exit {code}, expected 2"
+        errors = [ln for ln in lines if "error:" in ln]
+        if not errors or case.text not in errors[-1]:
+            return f"message lacks {case.text!r}"
+        if errors[-1].startswith("markerplace: error:") and len(lines) != 1:
+            return f"{len(lines)} stderr lines"
+    elif case.expect == "interrupted":
+        if code != 130 or case.text not in err:
+            return f"exit {code}, expected 130"
+    else:
+        if code != 0:
+            return f"exit {code}, expected 0"
+        if case.expect == "warn" and case.text not in err:
+            return f"no warning with {case.text!r}"
+    if case.extra.get("max_seconds") and seconds > case.extra["max_seconds"]:
+        return f"took {seconds:.0f} s"
+    if case.check is not None and code == 0:
+        return case.check()
+    return None
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workdir", default="out/hostile_inputs", help="scratch folder (emptied first)")
+    ap.add_argument("--only", default=None, help="run the cases whose name contains this")
+    args = ap.parse_args()
+    w = Path(args.workdir).resolve()
+    if w.exists():
+        for p in [w / "read_only" / "plan", w / "read_only"]:
+            if p.exists():
+                p.chmod(0o755)
+        shutil.rmtree(w)
+    (w / "out").mkdir(parents=True)
+    t_all = time.perf_counter()
+    f = make_fixtures(w)
+    rows, bad = [], 0
+    for case in cases(w, f):
+        if args.only and args.only not in case.name:
+            continue
+        if case.setup:
+            case.setup()
+        argv = case.argv
+        prefix = without_root_powers([]) if case.extra.get("no_root") else []
+        if case.extra.get("concurrent"):
+            cmd = [sys.executable, "-m", "markerplace.cli", *argv]
+            t0 = time.perf_counter()
+            procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=w)
+                     for _ in range(case.extra["concurrent"])]
+            outs = [p.communicate(timeout=600) for p in procs]
+            code = max(p.returncode for p in procs)
+            err = "".join(e for _, e in outs)
+            seconds = time.perf_counter() - t0
+        elif prefix:
+            res = subprocess.run([*prefix, sys.executable, "-m", "markerplace.cli", *argv], capture_output=True,
+                                 text=True, cwd=w, timeout=600)
+            code, err, seconds = res.returncode, res.stderr, 0.0
+        else:
+            code, _, err, seconds = cli(argv, w, interrupt_after=case.interrupt_after)
+        problem = judge(case, code, err, seconds)
+        bad += problem is not None
+        first = next((ln for ln in err.strip().splitlines() if "error:" in ln or "WARNING" in ln), "")[:150]
+        verdict = "OK " if problem is None else "BAD"
+        print(f"{verdict} {case.name:<42} exit {code:>3} {seconds:5.1f} s  {problem or first}", flush=True)
+        rows.append((case.name, case.expect, code, f"{seconds:.1f}", problem or "", first.replace("|", "/")))
+    ro = w / "read_only"
+    for p in (ro / "plan", ro):
+        p.chmod(0o755)
+    summary = f"{len(rows)} cases, {bad} bad, {time.perf_counter() - t_all:.0f} s"
+    print(summary)
+    lines = ["| case | expected | exit | s | problem | stderr |", "|---|---|---|---|---|---|"]
+    lines += [f"| {' | '.join(str(x) for x in r)} |" for r in rows]
+    (w / "hostile_inputs.md").write_text("\n".join(lines) + f"\n\n{summary}\n")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
