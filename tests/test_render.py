@@ -252,3 +252,18 @@ def test_cli_render_writes_three_files(tmp_path):
     assert depth.shape == (120, 160)
     # Straight ahead is the wall at x = 6, 3 m away.
     assert depth[60, 80] == pytest.approx(3.0, abs=1e-3)
+
+
+def test_two_renderers_in_one_process_render_their_own_scene():
+    """Each render makes its own GL context current: interleaved renders of two renderers
+    give each one's own image (the second-created context used to receive both)."""
+    near, far = Renderer(wall_scene(x=2.0)), Renderer(wall_scene(x=5.0))
+    try:
+        for _ in range(2):
+            assert np.abs(near.render(CAM, rgb=False, normal=False).depth - 2.0).max() < 1e-3
+            assert np.abs(far.render(CAM, rgb=False, normal=False).depth - 5.0).max() < 1e-3
+        near.set_markers([])
+        assert np.abs(near.render(CAM, rgb=False, normal=False).depth - 2.0).max() < 1e-3
+    finally:
+        near.close()
+        far.close()

@@ -296,6 +296,7 @@ class Renderer:
 
     def set_markers(self, markers: Sequence[Marker]) -> None:
         """Replace the drawn markers (the scene buffers are kept)."""
+        self._make_current()
         for _, vbo, _ in self._marker_draws:
             vbo.release()
         for key in [k for k in self._vaos if k[0] == "marker"]:
@@ -348,7 +349,8 @@ class Renderer:
         depth: bool = True,
         normal: bool = True,
     ) -> RenderResult:
-        """Render one view.
+        """Render one view (this renderer's GL context is made current first, so several
+        renderers can live in one process).
 
         Args:
             world_from_cam: (4, 4) camera pose (OpenCV camera frame, world z up, metres).
@@ -359,6 +361,15 @@ class Renderer:
         """
         if self._closed:
             raise RuntimeError("renderer is closed")
+        self._make_current()
+        return self._render(world_from_cam, rgb, depth, normal)
+
+    def _make_current(self) -> None:
+        """Make this renderer's GL context the current one (and leave it current: moderngl's
+        ``with ctx`` would restore the previous context, possibly none, on exit)."""
+        self.ctx.mglo.__enter__()
+
+    def _render(self, world_from_cam: np.ndarray, rgb: bool, depth: bool, normal: bool) -> RenderResult:
         outputs = (bool(rgb), bool(depth), bool(normal))
         if not any(outputs):
             raise ValueError("request at least one of rgb, depth, normal")
@@ -428,6 +439,7 @@ class Renderer:
             return
         self._closed = True
         try:
+            self._make_current()
             self.ctx.release()
         except Exception:  # pragma: no cover - best effort on teardown
             log.debug("GL context release failed", exc_info=True)
