@@ -95,3 +95,23 @@ def test_exported_mesh_plans_like_the_builtin(tiny_plan, tmp_path):
     for ma, mb in zip(a, b):
         assert np.allclose(ma["position"], mb["position"], atol=0.02)
         assert np.allclose(ma["normal"], mb["normal"], atol=0.02)
+
+
+def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
+    """prepare() drops candidates that no camera pose sees (occlusion included) and counts them:
+    no method can place a tag nobody sees."""
+    from dataclasses import replace
+
+    from markerplace.discretize import DiscretizeConfig
+    from markerplace.observe import ObserveConfig, SceneSpec
+    from markerplace.planner import PlanConfig, prepare
+
+    config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
+                        observe=ObserveConfig(workers=1))
+    data = prepare(SceneSpec("tiny"), config, tmp_path, progress=False)
+    C = data.num_candidates
+    assert C == len(data.disc.candidate_position) >= 4
+    assert all(len(cov.pose_idx) > 0 for cov in data.coverages[:C])
+    removed = data.disc.summary["candidates_removed"]
+    assert removed["not seen"] >= 1  # with 2 yaws on a 1 m grid some walls face no camera
+    assert set(removed) == {"glass", "does not fit", "not seen"}
