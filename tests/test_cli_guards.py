@@ -11,8 +11,12 @@ import time
 import numpy as np
 import pytest
 
-from markerplace import validation
 from markerplace.cli import build_parser, main
+
+try:
+    from markerplace import validation
+except ImportError:  # a version without it: its tests must fail, the CLI tests still run
+    validation = None
 from markerplace.errors import UserError
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]

@@ -21,8 +21,10 @@ FAR = np.array([1.0e6, 2.0e6, 0.0])  # survey-like coordinates, world metres
 @pytest.fixture(autouse=True)
 def _fresh_warnings():
     """Loader warnings are printed once per process; each test wants to see its own."""
-    from markerplace.scene import sanity
-
+    try:
+        from markerplace.scene import sanity
+    except ImportError:  # a version without the checks (the tests must fail on it, not error)
+        return
     sanity._WARNED.clear()
 
 
