@@ -156,7 +156,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
+    t0 = time.perf_counter()
     scene = scene_spec.load()
+    timings["load"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     disc_key = cache.hash_of("discretize-v2", cache.scene_hash(scene), config.discretize)
