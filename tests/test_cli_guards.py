@@ -221,6 +221,7 @@ def test_size_guard_refuses_a_run_that_would_not_fit(tmp_path, capsys, monkeypat
     assert time.perf_counter() - t0 < 20
     line = _one_line_error(capsys, "camera poses", "GiB of memory", "--force", "--grid-spacing")
     assert "more than 200,000 poses" in line
+    assert not (tmp_path / "o").exists()  # a refused run leaves nothing behind
 
 
 def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):

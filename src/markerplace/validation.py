@@ -10,9 +10,10 @@ in milliseconds, before the expensive stages.
   library's config objects. :func:`parse_floats` and :func:`parse_int_list` parse the
   comma-separated options (``--pose``, ``--start``, ``--k``).
 * **Output paths.** :func:`check_output_dir` (``--out`` of ``plan``/``evaluate``) and
-  :func:`check_output_file` (``render --out PREFIX``, ``scene export OUT``) create what is
-  missing and prove the place is writable with a real test write (``os.access`` says yes to
-  root even on read-only folders).
+  :func:`check_output_file` (``render --out PREFIX``, ``scene export OUT``) prove the place is
+  writable with a real test write in it or in the nearest existing folder above it
+  (``os.access`` says yes to root even on read-only folders); they create nothing, so a refused
+  run leaves no empty folder behind.
 * **Run size.** :func:`estimate_run` estimates the camera poses (an upper bound from the
   model's footprint), the peak memory and the wall-clock time of a ``plan``/``evaluate`` run
   from the costs measured on the reference machine (README, Benchmarks); :func:`check_run_size`
@@ -275,11 +276,23 @@ def _first_file_above(path: Path) -> Path | None:
     return None
 
 
-def _probe_write(folder: Path, option: str) -> None:
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest existing ancestor."""
+    for p in (path, *path.parents):
+        if p.exists():
+            return p
+    return Path(".")
+
+
+def _probe_write(path: Path, option: str) -> None:
+    """Create and delete a file in ``path``'s nearest existing folder (``path`` itself when it
+    exists): what is missing below it can then be created by the run itself."""
+    folder = _nearest_existing(path)
     try:
         fd, tmp = tempfile.mkstemp(prefix=".markerplace-write-test-", dir=folder)
     except OSError as err:
-        raise UserError(f"{option} {folder}: cannot write there ({err.strerror or err.__class__.__name__}); "
+        where = "" if folder == path else f" ({folder} is where it would be created)"
+        raise UserError(f"{option} {path}: cannot write there{where}: {err.strerror or err.__class__.__name__}; "
                         "choose a writable folder") from None
     os.close(fd)
     try:
@@ -289,11 +302,12 @@ def _probe_write(folder: Path, option: str) -> None:
 
 
 def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
-    """Make sure ``path`` is (or can become) a writable folder; create it.
+    """Make sure ``path`` is, or can be created as, a writable folder (nothing is created).
 
     Raises:
-        UserError: ``path`` or one of its parents is a file, it cannot be created, or a test
-            write into it fails (read-only folder or file system, no permission, disk full).
+        UserError: ``path`` or one of its parents is a file, or a test write into it (or into
+            the nearest existing folder above it) fails: read-only folder or file system, no
+            permission, disk full.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -301,22 +315,16 @@ def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
     blocker = _first_file_above(path.parent)
     if blocker is not None:
         raise UserError(f"{option} {path}: {blocker} is a file, so no folder can be made under it; give another path")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UserError(f"{option} {path}: cannot create the folder ({err.strerror or err.__class__.__name__}); "
-                        "choose a writable place") from None
     _probe_write(path, option)
     return path
 
 
 def check_output_file(path: str | os.PathLike, option: str, suffixes: Sequence[str] = ("",)) -> Path:
-    """Make sure files ``str(path) + suffix`` can be written: their folder is (or can become) a
-    writable folder, and none of them is an existing folder. Creates the folder.
+    """Make sure files ``str(path) + suffix`` can be written: their folder is, or can be created
+    as, a writable folder, and none of them is an existing folder (nothing is created).
 
     Raises:
-        UserError: a parent is a file, the folder cannot be created or written, or a target
-            is a folder.
+        UserError: a parent is a file, the folder cannot be written, or a target is a folder.
     """
     path = Path(path)
     if str(path).endswith(("/", os.sep)) or path.name in ("", ".", ".."):
@@ -329,11 +337,6 @@ def check_output_file(path: str | os.PathLike, option: str, suffixes: Sequence[s
     blocker = _first_file_above(folder)
     if blocker is not None:
         raise UserError(f"{option} {path}: {blocker} is a file, so it cannot hold {path.name}; give another path")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UserError(f"{option} {path}: cannot create {folder} ({err.strerror or err.__class__.__name__}); "
-                        "choose a writable place") from None
     _probe_write(folder, option)
     return path
 
