@@ -260,3 +260,18 @@ def test_force_flag_is_accepted_by_plan_and_evaluate():
     parser = build_parser()
     assert parser.parse_args(["plan", "tiny", "--out", "x", "--force"]).force
     assert not parser.parse_args(["evaluate", "tiny", "--out", "x"]).force
+
+
+def test_size_guard_counts_storeys_of_level_all():
+    from dataclasses import replace
+
+    from markerplace.discretize import DiscretizeConfig
+    from markerplace.planner import PlanConfig
+    from markerplace.scene import load_scene
+
+    house = load_scene("house")  # two storeys
+    every = validation.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=None)))
+    one = validation.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=0)))
+    assert every.storeys == 2 and one.storeys == 1 and every.poses == 2 * one.poses
+    assert validation.estimate_run(load_scene("tiny"), PlanConfig()).storeys == 1
+    assert "x 2 storeys" in every.describe()

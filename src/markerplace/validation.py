@@ -357,6 +357,8 @@ SECONDS_PER_QUERY_CORE = 0.1
 """Localizing one test image on one core (README, Results: room and office evaluations)."""
 
 
+STOREY_HEIGHT_M = 3.5
+"""Height per storey when guessing how many storeys ``--level all`` plans."""
 LARGE_FOOTPRINT_M2 = 10_000.0
 """A refused run over this footprint also suggests ``--unit-scale`` (a model in cm looks 10^4 x larger)."""
 
@@ -381,8 +383,9 @@ class RunEstimate:
     """Estimated size of a run (see :func:`estimate_run`).
 
     Attributes:
-        footprint_m2: area where cameras may stand (bounding box less the clearance), m^2.
-        poses: camera poses, an upper bound (footprint / grid_spacing^2 x yaws).
+        footprint_m2: area where cameras may stand on one storey (bounding box less the
+            clearance), m^2.
+        poses: camera poses, an upper bound (footprint / grid_spacing^2 x yaws x storeys).
         memory_bytes: peak memory, bytes.
         seconds: wall-clock time on ``workers`` processes.
         workers: rendering processes.
@@ -395,9 +398,11 @@ class RunEstimate:
     seconds: float
     workers: int
     queries: int = 0
+    storeys: int = 1
 
     def describe(self) -> str:
-        text = (f"up to about {self.poses:,} camera poses ({self.footprint_m2:.0f} m^2 footprint), "
+        where = f"{self.footprint_m2:.0f} m^2 footprint" + (f" x {self.storeys} storeys" if self.storeys > 1 else "")
+        text = (f"up to about {self.poses:,} camera poses ({where}), "
                 f"{_gib(self.memory_bytes)} of memory and {_duration(self.seconds)} on {self.workers} worker(s)")
         if self.queries:
             text += f" including {self.queries:,} test-image localizations"
@@ -436,7 +441,9 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
 
     Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
-    by ``grid_spacing^2``, times the yaws (an upper bound: walls and furniture take space).
+    by ``grid_spacing^2``, times the yaws, times the storeys planned (``--level N``: one;
+    ``--level all``: one per started 3.5 m of height above the first 0.5 m). An upper bound:
+    walls and furniture take space.
     Memory and time use the per-pose costs measured on the reference machine (module
     constants). ``evaluate`` adds a map re-render per placement with markers and one
     localization per test image, test set and placement.
@@ -449,7 +456,8 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     h = max(float(hi[1] - lo[1]) - 2 * d.clearance, 0.0)
     footprint = w * h
     locations = (math.floor(w / d.grid_spacing) + 1) * (math.floor(h / d.grid_spacing) + 1) if footprint > 0 else 1
-    poses = int(locations * d.num_yaws)
+    storeys = 1 if d.level is not None else max(1, math.ceil((float(hi[2] - lo[2]) - 0.5) / STOREY_HEIGHT_M))
+    poses = int(locations * d.num_yaws * storeys)
     workers = default_workers(plan_config.observe.workers)
     cells = (float(hi[0] - lo[0]) / _CELL + 20) * (float(hi[1] - lo[1]) / _CELL + 20)
     memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
@@ -463,7 +471,7 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
         queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
         core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
             + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE
-    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries)
+    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys)
 
 
 def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
