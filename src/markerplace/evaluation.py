@@ -1,6 +1,6 @@
 """Evaluation maths of the simulation testbed: test poses, pose errors and recall.
 
-Test poses (paper, Sec. "The map and test data"; DESIGN.md section 4)
+Test poses (paper, Sec. "The map and test data"; docs/design.md section 3)
 --------------------------------------------------------------------
 A test pose is a feasible camera pose (the map poses of the planner's discretization), drawn
 either ``uniform`` or ``weighted`` towards low localizability scores with the paper's weights

@@ -10,8 +10,8 @@ Frames and units
   and is level (no roll, no pitch).
 * Marker: ``world_from_marker`` with origin at the tag centre, z out of the wall towards
   viewers (the wall normal), x to a facing viewer's right, y up. This is OpenCV's ArUco
-  convention and is right-handed. (DESIGN.md says "y down"; with z towards the viewer and x to
-  the right that frame would be left-handed, so we use y up.) Size is the edge of the black
+  convention and is right-handed ("y down" together with z towards the viewer and x to the
+  right would be left-handed; see docs/design.md section 2). Size is the edge of the black
   square.
 * Depth: planar z in metres (distance along the optical axis), 0 where nothing was hit.
 """

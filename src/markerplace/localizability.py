@@ -1,6 +1,6 @@
 """Camera localizability: information matrices, entropy, marker models, marker visibility.
 
-This module implements the closed form of DESIGN.md section 5 (the paper's factor graphs
+This module implements the closed form of docs/design.md section 4 (the paper's factor graphs
 marginalized analytically), batched over all camera poses.
 
 Conventions
@@ -46,7 +46,7 @@ ENTROPY_CONST = 3.0 * (1.0 + np.log(2.0 * np.pi))
 
 @dataclass(frozen=True)
 class NoiseConfig:
-    """Noise parameters of the synthetic localization problem (DESIGN.md section 4).
+    """Noise parameters of the synthetic localization problem (docs/design.md section 3).
 
     Attributes:
         prior_sigma: standard deviation of the camera pose prior, the same for all 6 tangent
@@ -285,7 +285,7 @@ def information_gain(Lambda: np.ndarray, M: np.ndarray) -> np.ndarray:
 
 def marker_information_paper(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
                              noise: NoiseConfig = NoiseConfig()) -> np.ndarray:
-    """Camera information from one marker, the paper's model (DESIGN.md section 5, 'paper').
+    """Camera information from one marker, the paper's model (docs/design.md section 4, 'paper').
 
     Graph: ``BetweenFactorPose3(cam, marker, cam_from_marker, sigma_rel)`` plus
     ``PriorFactorPose3(marker, sigma_prior)``. The between error lives in the marker's tangent
@@ -331,7 +331,7 @@ def marker_information_corners(world_from_cam: np.ndarray, world_from_marker: np
                                size: float, K: np.ndarray, noise: NoiseConfig = NoiseConfig(),
                                image_size: tuple[int, int] | None = None,
                                min_side_px: float = MIN_SIDE_PX) -> np.ndarray:
-    """Camera information from one marker, 'corners' model (DESIGN.md section 5).
+    """Camera information from one marker, 'corners' model (docs/design.md section 4).
 
     The 4 corners of the black square are exactly known 3D points (no landmark noise),
     measured with pixel noise ``noise.pixel_sigma``: ``M = sum_corners J^T J / sigma_px^2``.
@@ -381,7 +381,7 @@ def marker_visibility(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
                       image_size: tuple[int, int], max_range: float = 10.0,
                       max_bearing_deg: float | None = 45.0, max_view_angle_deg: float = 80.0,
                       occluded: np.ndarray | None = None) -> np.ndarray:
-    """Which camera poses see a marker (DESIGN.md section 4, marker visibility).
+    """Which camera poses see a marker (docs/design.md section 3, marker visibility).
 
     A pose sees the marker when all hold:
 

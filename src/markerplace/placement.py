@@ -5,7 +5,7 @@ feasible camera pose without markers (see :mod:`markerplace.localizability`), an
 marker m a :class:`MarkerCoverage`, the sparse set of poses that see it with the information
 ``M`` (6, 6) it adds there. Everything below is exact arithmetic on these arrays; no scene.
 
-Definitions (paper, Methods; DESIGN.md section 6)
+Definitions (paper, Methods; docs/design.md section 5)
 -------------------------------------------------
 * Information gain at pose c: ``I(m, c) = 1/2 [ln det(Lambda_c + M_cm) - ln det(Lambda_c)]``,
   0 where m is not seen.

@@ -1,6 +1,6 @@
 """SIFT extraction and lifting of keypoints to 3D with a depth map.
 
-Two presets (DESIGN.md section 4):
+Two presets (docs/design.md section 3):
 
 * :data:`SIFT_SCORING` -- nfeatures 1000, contrastThreshold 0.1, edgeThreshold 5 (planner).
 * :data:`SIFT_DEFAULT` -- OpenCV defaults (localization: map and query images).

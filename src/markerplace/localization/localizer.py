@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class LocalizerConfig:
-    """Localization parameters (paper / DESIGN.md section 4 defaults).
+    """Localization parameters (paper defaults, docs/design.md section 3).
 
     Attributes:
         num_candidates: map images retrieved per query (paper: 10).
