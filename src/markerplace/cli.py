@@ -43,7 +43,6 @@ def cmd_scene_list(args: argparse.Namespace) -> int:
 def cmd_scene_export(args: argparse.Namespace) -> int:
     from .scene import load_scene
     from .scene.export import export_glb
-
     from .validation import check_output_file
 
     check_output_file(args.out, "scene export OUT")
@@ -61,7 +60,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render.renderer import Renderer
     from .render.views import default_pose, write_render_outputs
     from .scene import load_scene
-
     from .validation import check_output_file, check_pose_in_scene, check_render_sees_something
     from .worldframe import markers_to_internal, points_to_internal, world_offset
 
@@ -142,12 +140,10 @@ def plan_config_from_args(args: argparse.Namespace):
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from .markers import load_markers
+    from .markers import check_markers_on_walls, load_markers
     from .observe import SceneSpec
     from .planner import first_pick_gain, place, prepare, validate
     from .report.plan_outputs import write_plan_outputs
-
-    from .markers import check_markers_on_walls
     from .validation import check_output_dir
     from .worldframe import markers_to_internal, world_offset
 
