@@ -308,3 +308,24 @@ def test_office_scan_size_accuracy_and_time(tmp_path):
         floor = P[np.abs(t - 1.0) < 0.01] - [0.0, 0.0, 1.0]
         near = rs.compute_distance(o3d.core.Tensor(floor.astype(np.float32))).numpy()
         assert np.mean(near < 0.05) > 0.9, room.name
+
+
+def test_discretization_of_the_scan_matches_the_original(tiny_scan):
+    """The planner on the fused scan finds (nearly) the camera locations of the procedural
+    original on the same grid, its storey and wall candidates, despite holes and noise."""
+    from markerplace.discretize import DiscretizeConfig, discretize
+
+    out, _ = tiny_scan
+    original = discretize(load_scene("tiny"), DiscretizeConfig())
+    scan = discretize(load_scene(str(out)), DiscretizeConfig())
+    assert len(scan.storeys) == 1 and abs(scan.storeys[0] - original.storeys[0]) < 0.02
+    ours = {tuple(np.round(p, 3)) for p in scan.locations}
+    found = np.mean([tuple(np.round(p, 3)) in ours for p in original.locations])
+    # tiny is 3.5 m across: its outer ring of lattice points sits exactly at the 0.3 m
+    # clearance from the true walls and a fused wall 1-2 cm inwards drops them (the office and
+    # house scans find 97 % and 92 %, benchmarks/scan_plan.py)
+    assert found >= 0.75, found
+    assert all(tuple(np.round(p, 3)) in {tuple(np.round(q, 3)) for q in original.locations} or
+               np.all((p > 0.3) & (p < 3.3)) for p in scan.locations)
+    assert len(scan.locations) <= 1.1 * len(original.locations)  # no leak outside the room
+    assert len(scan.candidate_position) >= 0.6 * len(original.candidate_position)

@@ -175,10 +175,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def _add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
     g = p.add_argument_group("discretization")
-    g.add_argument("--height", type=float, default=1.5, help="eye-level plane height above the floor, metres (default 1.5)")
+    g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
     g.add_argument("--level", type=_parse_level, default=None, metavar="N|all",
                    help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget (default all)")
-    g.add_argument("--start", default=None, help="X,Y start point of the free-space scan (default: automatic)")
+    g.add_argument("--start", default=None, help="X,Y: plan only the free region holding this point (default: every region of at least 2 m^2)")
     g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
     g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")
     g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")

@@ -105,30 +105,48 @@ class RayCaster:
         f[ok] = ids[ok]
         return t, f
 
-    def all_hits(self, origins: np.ndarray, dirs: np.ndarray, max_t: float | np.ndarray = np.inf
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def all_hits(self, origins: np.ndarray, dirs: np.ndarray, max_t: float | np.ndarray = np.inf,
+                 step: float = 1e-4, max_hits: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every intersection along each ray, nearest first per ray.
+
+        Repeated first-hit queries, each ray restarting ``step`` metres past its last hit
+        (Open3D's ``list_intersections`` was seen to corrupt the heap on large batches, so it
+        is not used). Surfaces closer together than ``step`` along a ray count once.
 
         Args:
             origins: (M, 3) ray origins, metres.
             dirs: (M, 3) directions (normalized here).
             max_t: rays end at this distance, metres (scalar or (M,)).
+            step: restart offset past each hit, metres.
+            max_hits: at most this many hits per ray.
 
         Returns:
             ``ray`` (H,) int64 ray index, ``t`` (H,) float64 distance and ``face`` (H,) int64,
-            sorted by ray and then by distance. A ray through a shared edge may report both
-            faces at the same distance.
+            sorted by ray and then by distance.
         """
-        M = len(np.asarray(origins).reshape(-1, 3))
+        o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+        M = len(o)
         if M == 0 or self.num_faces == 0:
             return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
-        out = self._embree().list_intersections(self._rays(origins, dirs))
-        splits = out["ray_splits"].numpy().astype(np.int64)
-        ray = np.repeat(np.arange(M, dtype=np.int64), np.diff(splits))
-        t = out["t_hit"].numpy().astype(np.float64)
-        face = out["primitive_ids"].numpy().astype(np.int64)
-        lim = np.broadcast_to(np.asarray(max_t, dtype=np.float64), (M,))
-        keep = (t <= lim[ray]) & (t >= 0) & (face < self.num_faces)
-        ray, t, face = ray[keep], t[keep], face[keep]
+        d = d / np.where(np.linalg.norm(d, axis=1, keepdims=True) > 0, np.linalg.norm(d, axis=1, keepdims=True), 1.0)
+        lim = np.broadcast_to(np.asarray(max_t, dtype=np.float64), (M,)).copy()
+        active = np.arange(M)
+        offset = np.zeros(M)  # distance travelled so far
+        rays, ts, faces = [], [], []
+        for _ in range(max_hits):
+            if len(active) == 0:
+                break
+            t, f = self.first_hits(o[active] + d[active] * offset[active, None], d[active], lim[active] - offset[active])
+            hit = f >= 0
+            active, t, f = active[hit], t[hit], f[hit]
+            total = offset[active] + t
+            rays.append(active)
+            ts.append(total)
+            faces.append(f)
+            offset[active] = total + step
+        if not rays:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+        ray, t, face = np.concatenate(rays), np.concatenate(ts), np.concatenate(faces)
         order = np.lexsort((t, ray))
         return ray[order], t[order], face[order]

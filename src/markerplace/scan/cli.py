@@ -134,7 +134,7 @@ def add_scan_export_args(p_export: argparse.ArgumentParser) -> None:
                         "Kinect-like noisy depth (holes, noise), fuse into a vertex-coloured mesh; OUT must be .ply; "
                         "--seed also seeds the walk and the noise")
     g.add_argument("--voxel", type=float, default=None,
-                   help="--as-scan: TSDF voxel edge, metres (default 0.04: about 0.6 million faces for the office)")
+                   help="--as-scan: TSDF voxel edge, metres (default 0.04: about 0.75 million faces for the office)")
     g.add_argument("--keep-frames", default=None, metavar="DIR",
                    help="--as-scan: also write the rendered RGB-D frames to DIR in the markerplace layout (input for `markerplace fuse`)")
     fallback = p_export.get_default("func")
