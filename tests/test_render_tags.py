@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pupil_apriltags
 import pytest
 
 from markerplace.errors import UserError
@@ -11,6 +10,7 @@ from markerplace.geometry import Intrinsics, project, world_from_cam_pose, world
 from markerplace.markers import Marker
 from markerplace.render import renderer as renderer_mod
 from markerplace.render.renderer import Renderer
+from markerplace.localization.tags import make_detector
 from markerplace.render.tags import PUPIL_TO_MARKER_CORNERS, QUIET_BITS, TAG_BITS, outer_size, tag_image
 from markerplace.scene.types import MeshPart, Scene
 
@@ -24,7 +24,7 @@ def grey_wall(x: float = 3.0) -> Scene:
 
 @pytest.fixture(scope="module")
 def detector():
-    return pupil_apriltags.Detector(families="tag36h11")
+    return make_detector()
 
 
 def test_tag_image_layout():

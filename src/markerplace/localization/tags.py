@@ -55,21 +55,40 @@ class TagDetection:
     hamming: int = 0
 
 
+def make_detector(**settings):
+    """A pupil-apriltags ``Detector`` for tag36h11 (keyword ``settings`` as pupil-apriltags)
+    that releases its C objects in the right order.
+
+    pupil-apriltags 1.0.4 frees the tag families before the detector, whose destructor then
+    reads them again (use after free: pupil-labs/apriltags PR #65, not released): deleting a
+    detector corrupts the heap and crashes the process later, somewhere else. Every detector
+    of the package and its tests comes from here.
+    """
+    import pupil_apriltags
+
+    class _Detector(pupil_apriltags.Detector):
+        def __del__(self):
+            ptr = getattr(self, "tag_detector_ptr", None)
+            if ptr is None:
+                return
+            self.libc.apriltag_detector_destroy.restype = None
+            self.libc.apriltag_detector_destroy(ptr)  # detaches and uninitializes the families
+            self.tag_detector_ptr = None
+            for family, tf in self.tag_families.items():
+                destroy = getattr(self.libc, f"{family}_destroy")
+                destroy.restype = None
+                destroy(tf)
+
+    return _Detector(**{"families": FAMILY, **settings})
+
+
 def _detector():
-    """One pupil-apriltags detector per process."""
+    """One detector per process, with the settings of the module docstring."""
     pid = os.getpid()
     det = _DETECTORS.get(pid)
     if det is None:
-        import pupil_apriltags
-
-        det = pupil_apriltags.Detector(
-            families=FAMILY,
-            nthreads=1,
-            quad_decimate=QUAD_DECIMATE,
-            quad_sigma=0.0,
-            refine_edges=1,
-            decode_sharpening=0.25,
-        )
+        det = make_detector(nthreads=1, quad_decimate=QUAD_DECIMATE, quad_sigma=0.0, refine_edges=1,
+                            decode_sharpening=0.25)
         _DETECTORS[pid] = det
     return det
 
