@@ -94,3 +94,28 @@ def test_missing_egl_raises_user_error_with_hint(monkeypatch):
     assert "libegl1" in str(err.value) and "make setup" in str(err.value)
     assert "\n" not in str(err.value)
     assert renderer_mod.EGL_HINT in str(err.value)
+
+
+def test_detector_is_destroyed_before_its_tag_families():
+    """pupil-apriltags frees the families first and the detector's destructor then writes into
+    them (heap corruption); make_detector's detectors release the detector first."""
+    det = make_detector()
+    real = det.libc
+    calls = []
+
+    class Recorder:
+        def __getattr__(self, name):
+            fn = getattr(real, name)
+
+            def call(*args):
+                calls.append(name)
+                return fn(*args)
+
+            call.restype = None
+            return call
+
+    det.libc = Recorder()
+    det.__del__()
+    assert calls == ["apriltag_detector_destroy", "tag36h11_destroy"]
+    det.__del__()  # a second call (the garbage collector's) does nothing
+    assert len(calls) == 2
