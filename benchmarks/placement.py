@@ -30,14 +30,14 @@ import numba
 import numpy as np
 
 from markerplace.geometry import Intrinsics, world_from_cam_poses, world_from_marker_pose
-from markerplace.localizability import (
+from markerplace.plan.localizability import (
     NoiseConfig,
     entropy,
     marker_information_paper,
     marker_visibility,
     pose_information,
 )
-from markerplace.placement import MarkerCoverage, omp_greedy
+from markerplace.plan.placement import MarkerCoverage, omp_greedy
 
 GOAL_SPEEDUP = 1000.0
 GOAL_LAZY_S = 5.0
@@ -209,8 +209,8 @@ def part_c(args) -> None:
     import resource
     import tempfile
 
-    from markerplace.observe import SceneSpec
-    from markerplace.planner import PlacementConfig, PlanConfig, place, prepare
+    from markerplace.plan.observe import SceneSpec
+    from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
 
     config = PlanConfig(placement=PlacementConfig(k=args.k))
     with tempfile.TemporaryDirectory() as run_dir:

@@ -42,7 +42,7 @@ def emit(name: str, value) -> None:
 
 def scan_of(name: str, voxel: float, cache: Path) -> tuple[Path, float]:
     """Path of the fused scan of built-in ``name`` at ``voxel`` (built when missing) and the seconds it took."""
-    from markerplace.cli import main
+    from markerplace.cli.main import main
 
     path = cache / f"{name}_scan_{voxel:g}.ply"
     if path.exists():
@@ -102,7 +102,7 @@ class MemorySampler:
 
 
 def part_a(args) -> None:
-    from markerplace.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize import DiscretizeConfig, discretize
     from markerplace.scene import load_scene
 
     for name in args.scenes.split(","):
@@ -131,8 +131,8 @@ def part_a(args) -> None:
 def part_b(args) -> None:
     import tempfile
 
-    from markerplace.observe import SceneSpec
-    from markerplace.planner import PlacementConfig, PlanConfig, place, prepare
+    from markerplace.plan.observe import SceneSpec
+    from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
     from markerplace.scene import load_scene
 
     path, t_scan = scan_of(args.big_scene, args.big_voxel, Path(args.cache))

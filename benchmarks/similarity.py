@@ -19,8 +19,8 @@ import time
 
 import numpy as np
 
-from markerplace.observe import Observations, SceneSpec
-from markerplace.similarity import SimilarityConfig, benchmark_similarity, count_similar, measure_error
+from markerplace.plan.observe import Observations, SceneSpec
+from markerplace.plan.similarity import SimilarityConfig, benchmark_similarity, count_similar, measure_error
 
 
 def emit(name: str, value) -> None:
@@ -33,7 +33,7 @@ def real(args) -> None:
     path = args.observations
     tmp = None
     if path is None:
-        from markerplace.planner import PlanConfig, prepare
+        from markerplace.plan.planner import PlanConfig, prepare
 
         tmp = tempfile.TemporaryDirectory()
         prepare(SceneSpec(args.scene), PlanConfig(), tmp.name, progress=False)

@@ -7,8 +7,8 @@ import logging
 import numpy as np
 import pytest
 
-from markerplace import cache
-from markerplace.cli import main
+from markerplace.runtime import cache
+from markerplace.cli.main import main
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 
@@ -29,7 +29,7 @@ def test_damaged_file_is_stale_with_a_warning_naming_it(tmp_path, caplog, damage
     cache.mark_done(art, "k")
     data = art.read_bytes()
     art.write_bytes({"truncate": data[:50], "flip": data[:-1] + b"\xff", "grow": data + b"x"}[damage])
-    with caplog.at_level(logging.WARNING, logger="markerplace.cache"):
+    with caplog.at_level(logging.WARNING, logger="markerplace.runtime.cache"):
         assert not cache.is_fresh(art, "k")
     assert any(str(art) in r.getMessage() and "recomputing" in r.getMessage() for r in caplog.records)
 
@@ -62,7 +62,7 @@ def test_folder_artifact_checks_every_file(tmp_path, caplog):
     cache.mark_done(folder, "k")
     assert (tmp_path / "features.meta.json").exists() and cache.is_fresh(folder, "k")
     (folder / "b.npy").write_bytes((folder / "b.npy").read_bytes()[:-8])
-    with caplog.at_level(logging.WARNING, logger="markerplace.cache"):
+    with caplog.at_level(logging.WARNING, logger="markerplace.runtime.cache"):
         assert not cache.is_fresh(folder, "k")
     assert "b.npy" in caplog.text
     cache.mark_done(folder, "k")
@@ -74,7 +74,7 @@ def test_load_fresh_falls_back_when_loading_fails(tmp_path, caplog):
     art = tmp_path / "a.npz"
     art.write_bytes(b"not a zip file at all")
     cache.mark_done(art, "k")  # the checksum matches, but the bytes were never a valid npz
-    with caplog.at_level(logging.WARNING, logger="markerplace.cache"):
+    with caplog.at_level(logging.WARNING, logger="markerplace.runtime.cache"):
         assert cache.load_fresh(art, "k", lambda p: np.load(p)["x"]) is None
     assert str(art) in caplog.text and "could not read" in caplog.text
     np.savez(art, x=np.arange(3))

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from markerplace.cli import build_parser, main
+from markerplace.cli.main import build_parser, main
 
 try:
     from markerplace import validation
@@ -126,9 +126,9 @@ def test_read_only_folder_is_one_line_error(command, tmp_path):
     ("--start", "1,2,3", "X,Y"),
 ])
 def test_plan_numbers_are_checked_before_any_work(option, value, needle, tmp_path, capsys, monkeypatch):
-    import markerplace.planner
+    import markerplace.plan.planner
 
-    monkeypatch.setattr(markerplace.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     t0 = time.perf_counter()
     assert main(["plan", "tiny", "--out", str(tmp_path / "o"), *FAST, option, value]) == 2
     assert time.perf_counter() - t0 < 5
@@ -213,9 +213,9 @@ def test_bound_messages_name_option_value_range_and_unit():
 # --- item 3: the size guard --------------------------------------------------------------------------
 
 def test_size_guard_refuses_a_run_that_would_not_fit(tmp_path, capsys, monkeypatch):
-    import markerplace.planner
+    import markerplace.plan.planner
 
-    monkeypatch.setattr(markerplace.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     t0 = time.perf_counter()
     assert main(["plan", "office", "--grid-spacing", "0.05", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert time.perf_counter() - t0 < 20
@@ -229,8 +229,8 @@ def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
 
     from dataclasses import replace
 
-    from markerplace.discretize import DiscretizeConfig
-    from markerplace.planner import PlanConfig
+    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.planner import PlanConfig
     from markerplace.scene import load_scene
 
     out = tmp_path / "p"
@@ -265,8 +265,8 @@ def test_force_flag_is_accepted_by_plan_and_evaluate():
 def test_size_guard_counts_storeys_of_level_all():
     from dataclasses import replace
 
-    from markerplace.discretize import DiscretizeConfig
-    from markerplace.planner import PlanConfig
+    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.planner import PlanConfig
     from markerplace.scene import load_scene
 
     house = load_scene("house")  # two storeys

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from markerplace.cli import build_parser, main
+from markerplace.cli.main import build_parser, main
 
 # infinite, NaN, negative, tiny, huge, overflowing and malformed values ...
 BAD = ["nan", "NaN", "inf", "-inf", "-0.0", "-1", "-2.5", "1e-300", "1e300", "1e400", "-1e400",

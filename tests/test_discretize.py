@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from markerplace import geometry
-from markerplace.discretize import DiscretizeConfig, discretize, load, save
+from markerplace.plan.discretize import DiscretizeConfig, discretize, load, save
 from markerplace.errors import UserError
 from markerplace.scene.types import MeshPart, Room, Scene
 

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from markerplace.discretize import DiscretizeConfig, discretize
-from markerplace.raycast import RayCaster
+from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.scene.raycast import RayCaster
 from markerplace.scene import load_scene
 from markerplace.scene.types import MeshPart, Scene
 

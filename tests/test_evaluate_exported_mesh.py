@@ -2,7 +2,7 @@
 
 import csv
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from markerplace import evaluation as ev
+from markerplace.testbed import evaluation as ev
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
 from markerplace.report import tables

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics, project
 from markerplace.scan.frames import (FrameWriter, associate, nearest, open_frameset, read_tum,
                                      rotation_from_quaternion)

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 
 from hostile_meshes import CORPUS
 

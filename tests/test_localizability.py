@@ -12,7 +12,7 @@ from markerplace.geometry import (
     world_from_cam_poses,
     world_from_marker_pose,
 )
-from markerplace.localizability import (
+from markerplace.plan.localizability import (
     ENTROPY_CONST,
     NoiseConfig,
     entropy,
@@ -100,7 +100,7 @@ def test_pose_information_batching_and_order_invariance() -> None:
 
 def test_compiled_kernel_matches_numpy_whitening() -> None:
     """The compiled per-pose sum equals the numpy whitened-Jacobian Gram (two implementations)."""
-    from markerplace.localizability import _gram, _whitened_jacobians
+    from markerplace.plan.localizability import _gram, _whitened_jacobians
 
     rng = np.random.default_rng(5)
     T, pts, idx = _scene(rng, n_poses=12, per_pose=80)

@@ -9,7 +9,7 @@ gtsam = pytest.importorskip("gtsam")
 from gtsam.symbol_shorthand import L, M, X  # noqa: E402
 
 from markerplace.geometry import Intrinsics, so3_exp, world_from_cam_pose, world_from_marker_pose  # noqa: E402
-from markerplace.localizability import (  # noqa: E402
+from markerplace.plan.localizability import (  # noqa: E402
     NoiseConfig,
     marker_information_corners,
     marker_information_paper,

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from markerplace import cache
+from markerplace.runtime import cache
 from markerplace.errors import UserError
 from markerplace.markers import load_markers
 

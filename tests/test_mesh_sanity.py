@@ -9,8 +9,8 @@ import logging
 import numpy as np
 import pytest
 
-from markerplace import cache
-from markerplace.cli import main
+from markerplace.runtime import cache
+from markerplace.cli.main import main
 from markerplace.errors import UserError
 from markerplace.scene import load_scene
 
@@ -212,9 +212,9 @@ def test_up_axis_scores_prefer_z_on_builtins(name):
      "tag 9 at (0.05, 0.90, 1.50) has normal (0.60, 0.00, 0.80), not horizontal"),
 ])
 def test_existing_marker_off_the_walls_stops_the_run(marker, message, tmp_path, capsys, monkeypatch):
-    import markerplace.planner
+    import markerplace.plan.planner
 
-    monkeypatch.setattr(markerplace.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     path = tmp_path / "existing.json"
     path.write_text(json.dumps({"markers": [marker]}))
     assert main(["plan", "tiny", "-k", "1", "--existing", str(path), "--out", str(tmp_path / "o"), *FAST]) == 2
@@ -310,11 +310,11 @@ def test_obj_missing_texture_is_named(meshes, tmp_path, caplog):
 
 @pytest.mark.parametrize("make", ["missing", "empty", "malformed"])
 def test_evaluate_checks_placements_before_any_work(make, tmp_path, capsys, monkeypatch):
-    import markerplace.planner
-    import markerplace.testbed
+    import markerplace.plan.planner
+    import markerplace.testbed.experiment
 
-    monkeypatch.setattr(markerplace.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
-    monkeypatch.setattr(markerplace.testbed, "run_evaluation", lambda *a, **k: pytest.fail("evaluation ran"))
+    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.testbed.experiment, "run_evaluation", lambda *a, **k: pytest.fail("evaluation ran"))
     folder = tmp_path / "placements"
     if make != "missing":
         folder.mkdir()

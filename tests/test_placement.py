@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.localizability import information_gain
-from markerplace.placement import (
+from markerplace.plan.localizability import information_gain
+from markerplace.plan.placement import (
     MarkerCoverage,
     _Problem,
     coverage_percentages,

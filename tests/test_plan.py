@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 
@@ -102,9 +102,9 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     no method can place a tag nobody sees."""
     from dataclasses import replace
 
-    from markerplace.discretize import DiscretizeConfig
-    from markerplace.observe import ObserveConfig, SceneSpec
-    from markerplace.planner import PlanConfig, prepare
+    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.observe import ObserveConfig, SceneSpec
+    from markerplace.plan.planner import PlanConfig, prepare
 
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
                         observe=ObserveConfig(workers=1))

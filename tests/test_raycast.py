@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from markerplace.raycast import RayCaster
+from markerplace.scene.raycast import RayCaster
 
 
 def _brute_all(V, F, o, d, max_t):

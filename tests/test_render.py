@@ -237,7 +237,7 @@ def test_write_render_outputs(tmp_path):
 def test_cli_render_writes_three_files(tmp_path):
     import trimesh
 
-    from markerplace.cli import main
+    from markerplace.cli.main import main
 
     # A 6 x 4 x 3 m closed box room as a PLY file (z up, metres); the camera stands inside.
     room = trimesh.creation.box(extents=[6.0, 4.0, 3.0])

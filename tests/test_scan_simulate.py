@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 from markerplace.geometry import world_from_cam_pose
-from markerplace.raycast import RayCaster
+from markerplace.scene.raycast import RayCaster
 from markerplace.scan.frames import open_frameset, load_frame
 from markerplace.scan.simulate import (DepthNoiseConfig, FrameSimulator, ScanConfig, WalkConfig, distance_to_scene,
                                        find_doorways, noisy_depth, plan_walk, world_from_cam_ypr)
@@ -313,7 +313,7 @@ def test_office_scan_size_accuracy_and_time(tmp_path):
 def test_discretization_of_the_scan_matches_the_original(tiny_scan):
     """The planner on the fused scan finds (nearly) the camera locations of the procedural
     original on the same grid, its storey and wall candidates, despite holes and noise."""
-    from markerplace.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize import DiscretizeConfig, discretize
 
     out, _ = tiny_scan
     original = discretize(load_scene("tiny"), DiscretizeConfig())

@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 
-from markerplace.cli import main
+from markerplace.cli.main import main
 from markerplace.scene import load_scene
 from markerplace.scene.catalogue import builtin_names
 from markerplace.scene.export import export_glb

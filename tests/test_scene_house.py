@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from markerplace.geometry import world_from_cam_pose
-from markerplace.raycast import RayCaster
+from markerplace.scene.raycast import RayCaster
 from markerplace.scene import load_scene
 from markerplace.scene.catalogue import list_scenes
 from markerplace.scene.export import export_glb

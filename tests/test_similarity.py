@@ -7,7 +7,7 @@ import logging
 import numpy as np
 import pytest
 
-from markerplace.similarity import (SimilarityConfig, count_similar, count_similar_approx, count_similar_exact,
+from markerplace.plan.similarity import (SimilarityConfig, count_similar, count_similar_approx, count_similar_exact,
                                     measure_error, synthetic_descriptors)
 
 log = logging.getLogger(__name__)

@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from markerplace import evaluation as ev
-from markerplace import testbed as tbm
+from markerplace.testbed import evaluation as ev
+from markerplace.testbed import experiment as tbm
 from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.scene.types import MeshPart, Scene
@@ -149,7 +149,7 @@ FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
 def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     import csv
 
-    from markerplace.cli import main
+    from markerplace.cli.main import main
 
     out = tmp_path / "eval"
     args = ["evaluate", "tiny", "--out", str(out), "--tests", "20", "--k", "2", "--runs", "1", *FAST]
@@ -185,7 +185,7 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
 
 
 def test_evaluate_bad_option_is_one_line_error(tmp_path, capsys):
-    from markerplace.cli import main
+    from markerplace.cli.main import main
 
     assert main(["evaluate", "tiny", "--out", str(tmp_path / "x"), "--tag-scale", "0", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

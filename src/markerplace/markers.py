@@ -130,16 +130,16 @@ def check_markers_on_walls(scene, markers, source: str = "markers", tolerance: f
     Each marker needs a near-horizontal normal (|n_z| <= 0.3), a surface roughly parallel to
     the tag (|cos| >= 0.85) within ``tolerance`` metres of its centre along -normal, and at least
     0.3 m of open space in front of it (else its normal points into the wall). Rays are cast
-    with :class:`~markerplace.raycast.RayCaster` on ``scene.geometry()``.
+    with :class:`~markerplace.scene.raycast.RayCaster` on ``scene.geometry()``.
 
     Raises:
         UserError: naming ``source``, the first offending marker's tag id and its position in
-            the user's frame (:mod:`markerplace.worldframe`), and what is wrong.
+            the user's frame (:mod:`markerplace.scene.worldframe`), and what is wrong.
     """
     if not markers:
         return
-    from .raycast import RayCaster
-    from .worldframe import points_to_user, world_offset
+    from .scene.raycast import RayCaster
+    from .scene.worldframe import points_to_user, world_offset
 
     P = np.array([m.position for m in markers], dtype=float).reshape(-1, 3)
     N = np.array([m.normal for m in markers], dtype=float).reshape(-1, 3)

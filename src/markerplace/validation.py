@@ -5,7 +5,7 @@ in milliseconds, before the expensive stages.
 
 * **Option values.** Every numeric command-line option has one :class:`Bound` (finite, in a
   range, with its unit and an example) in :data:`BOUNDS`; :func:`check_args` applies them to a
-  parsed command line (called once by :func:`markerplace.cli.main` for every subcommand), and
+  parsed command line (called once by :func:`markerplace.cli.main.main` for every subcommand), and
   :func:`check_plan_config` / :func:`check_evaluate_config` apply the same bounds to the
   library's config objects. :func:`parse_floats` and :func:`parse_int_list` parse the
   comma-separated options (``--pose``, ``--start``, ``--k``).
@@ -201,7 +201,7 @@ def parse_int_list(text: str, option: str, bound: Bound) -> tuple[int, ...]:
 
 
 def check_plan_config(config) -> None:
-    """Numeric settings of a :class:`~markerplace.planner.PlanConfig` (the same bounds as the
+    """Numeric settings of a :class:`~markerplace.plan.planner.PlanConfig` (the same bounds as the
     command line)."""
     d, p = config.discretize, config.placement
     K.check(p.k)
@@ -223,7 +223,7 @@ def check_plan_config(config) -> None:
 
 
 def check_evaluate_config(config) -> None:
-    """Numeric settings of an :class:`~markerplace.evaluation.EvaluateConfig`."""
+    """Numeric settings of an :class:`~markerplace.testbed.evaluation.EvaluateConfig`."""
     TESTS.check(config.tests)
     RUNS.check(config.runs)
     if not config.ks:
@@ -448,7 +448,7 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     constants). ``evaluate`` adds a map re-render per placement with markers and one
     localization per test image, test set and placement.
     """
-    from .workers import default_workers
+    from .runtime.workers import default_workers
 
     d = plan_config.discretize
     lo, hi = scene.bounds

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..evaluation import BASELINE_METHODS
+from ..testbed.evaluation import BASELINE_METHODS
 from .tables import display_name
 
 
@@ -70,7 +70,7 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
     Args:
         hits: (method, run, k) -> (n,) bool, the test images localized within the threshold;
             all arrays index the same test images. Candidates are the methods other than
-            ``none`` and the baselines (:data:`~markerplace.evaluation.BASELINE_METHODS`).
+            ``none`` and the baselines (:data:`~markerplace.testbed.evaluation.BASELINE_METHODS`).
         ks: marker budgets to compare.
         n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 

@@ -10,9 +10,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..cache import config_dict
+from ..runtime.cache import config_dict
 from ..io_utils import atomic_path, write_json, write_npz
-from ..localizability import entropy
+from ..plan.localizability import entropy
 from .figures import floor_map, per_location_mean
 from .printable import write_tag_sheets
 
@@ -64,13 +64,13 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
-    :mod:`markerplace.worldframe`; None = not shifted).
+    :mod:`markerplace.scene.worldframe`; None = not shifted).
     """
     out_dir = Path(out_dir)
     if world_offset is not None and np.any(world_offset):
         from dataclasses import replace
 
-        from ..worldframe import discretization_to_user, markers_to_user
+        from ..scene.worldframe import discretization_to_user, markers_to_user
 
         data = replace(data, disc=discretization_to_user(data.disc, world_offset))
         placement = replace(placement, markers=markers_to_user(placement.markers, world_offset))

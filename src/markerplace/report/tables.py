@@ -2,7 +2,7 @@
 
 A *recall row* is a dict with the ``recall.csv`` columns :data:`CSV_COLUMNS`:
 ``scene, method, run, k, test_set, threshold, recall, n_tests`` where ``threshold`` is a label
-such as ``5cm/5deg`` (see :func:`markerplace.evaluation.threshold_label`), ``recall`` is a
+such as ``5cm/5deg`` (see :func:`markerplace.testbed.evaluation.threshold_label`), ``recall`` is a
 fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``.
 
 Markdown tables print recall in percent. Methods with several runs (random and uniform

@@ -301,7 +301,7 @@ def plan_walk(scene: Scene, cfg: WalkConfig = WalkConfig(), seed: int = 0) -> tu
     Raises:
         UserError: the scene has no rooms, or no feasible position at all.
     """
-    from ..raycast import RayCaster
+    from ..scene.raycast import RayCaster
 
     if not scene.rooms:
         raise UserError(f"scene {scene.name!r} has no rooms: a simulated scan needs a built-in scene")
@@ -563,7 +563,7 @@ def distance_to_scene(points: np.ndarray, scene: Scene) -> np.ndarray:
     """(N,) unsigned distance (metres) from each of (N, 3) points to the scene's triangles.
 
     Open3D's ``RaycastingScene.compute_distance`` on the mesh recentred in float64 first (the
-    same float32 precaution as :class:`markerplace.raycast.RayCaster`).
+    same float32 precaution as :class:`markerplace.scene.raycast.RayCaster`).
     """
     import open3d as o3d
 

@@ -14,7 +14,7 @@ Checks and recentring (:mod:`markerplace.scene.sanity`)
 * A model whose bounding-box centre lies more than 1 km from the origin (survey coordinates) is
   recentred in float64 before the float32 conversion: internal = file (rotated, scaled) -
   ``offset``, a whole-metre (3,) vector kept in ``scene.meta["world_offset"]``. This is the only
-  place the shift is applied; :mod:`markerplace.worldframe` undoes it on every coordinate the
+  place the shift is applied; :mod:`markerplace.scene.worldframe` undoes it on every coordinate the
   user gives or reads (``--pose``, ``--start``, ``--existing``, ``--markers``, ``--placements``,
   placement.json/csv, tag sheets, scores.npz, figures), so users only ever see file coordinates.
 * Up axis: when the floor (area facing up at the bottom, furniture tops above it) fits another
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
-from ..worldframe import OFFSET_KEY
+from .worldframe import OFFSET_KEY
 from . import sanity
 from .transparency import material_transparency, read_gltf_json
 from .types import MeshPart, Scene
@@ -107,7 +107,7 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     lo, hi = _world_bounds(instances, world_from_file)
     _check_units(lo, hi, path, scale)
     offset = sanity.recentre_offset(lo, hi)
-    world_from_file[:3, 3] = -offset  # the one place the internal frame is shifted (markerplace.worldframe)
+    world_from_file[:3, 3] = -offset  # the one place the internal frame is shifted (markerplace.scene.worldframe)
     sanity.warn_missing_textures(path)
     parts = _to_parts(instances, world_from_file, path.stem, read_gltf_json(path) if is_gltf else None)
     scene = Scene(name=path.stem, parts=tuple(parts), source=str(path),

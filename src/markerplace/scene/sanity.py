@@ -5,7 +5,7 @@
   where more than :data:`MAX_NON_FINITE_FRACTION` of the vertices are bad is refused.
 * :func:`recentre_offset`: the whole-metre offset that brings a model far from the origin
   (survey coordinates) back near it before the float32 conversion; see
-  :mod:`markerplace.worldframe` for how it is undone on every output.
+  :mod:`markerplace.scene.worldframe` for how it is undone on every output.
 * :func:`up_axis_scores` / :func:`check_up_axis`: which axis looks like "up" (a floor facing up
   at the bottom of the model, furniture tops facing up above it); warns, naming the ``--up``
   value, when another axis fits far better than the one the file was read with.

@@ -1,4 +1,4 @@
-"""The ``evaluate`` subcommand: parses arguments and runs :func:`markerplace.testbed.run_evaluation`.
+"""The ``evaluate`` subcommand: parses arguments and runs :func:`markerplace.testbed.experiment.run_evaluation`.
 
 Wire it into the main parser with ``add_evaluate_parser(subparsers)``.
 """
@@ -9,13 +9,13 @@ import argparse
 import logging
 from pathlib import Path
 
-from .errors import UserError
+from ..errors import UserError
 
-log = logging.getLogger("markerplace.cli")
+log = logging.getLogger("markerplace.cli.main")
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
-    from .validation import EVAL_K, parse_int_list
+    from ..validation import EVAL_K, parse_int_list
 
     return parse_int_list(text, option, EVAL_K)
 
@@ -25,8 +25,8 @@ def _name_list(text: str) -> tuple[str, ...]:
 
 
 def evaluate_config_from_args(args: argparse.Namespace):
-    """Build an :class:`~markerplace.evaluation.EvaluateConfig` from parsed ``evaluate`` arguments."""
-    from .evaluation import EvaluateConfig
+    """Build an :class:`~markerplace.testbed.evaluation.EvaluateConfig` from parsed ``evaluate`` arguments."""
+    from ..testbed.evaluation import EvaluateConfig
 
     return EvaluateConfig(
         tests=args.tests,
@@ -47,13 +47,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
     from dataclasses import replace
 
-    from .cli import plan_config_from_args, plan_inputs_in_scene_frame
-    from .evaluation import find_placement_files, validate_evaluate_config
-    from .markers import load_markers
-    from .observe import SceneSpec
-    from .planner import validate
-    from .testbed import run_evaluation
-    from .validation import check_output_dir
+    from .main import plan_config_from_args, plan_inputs_in_scene_frame
+    from ..testbed.evaluation import find_placement_files, validate_evaluate_config
+    from ..markers import load_markers
+    from ..plan.observe import SceneSpec
+    from ..plan.planner import validate
+    from ..testbed.experiment import run_evaluation
+    from ..validation import check_output_dir
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
@@ -80,7 +80,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
-    from .cli import _add_plan_args, _add_scene_args
+    from .main import _add_plan_args, _add_scene_args
 
     p = subparsers.add_parser(
         "evaluate",

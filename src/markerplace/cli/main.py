@@ -10,11 +10,11 @@ import argparse
 import logging
 import sys
 
-from . import __version__
-from .errors import UserError
-from .log import setup_logging
+from .. import __version__
+from ..errors import UserError
+from ..log import setup_logging
 
-log = logging.getLogger("markerplace.cli")
+log = logging.getLogger("markerplace.cli.main")
 
 
 def _add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -25,13 +25,13 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def _parse_pose(text: str):
-    from .validation import COORDINATE, YAW_DEG, parse_floats
+    from ..validation import COORDINATE, YAW_DEG, parse_floats
 
     return parse_floats(text, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
 
 
 def cmd_scene_list(args: argparse.Namespace) -> int:
-    from .scene.catalogue import list_scenes
+    from ..scene.catalogue import list_scenes
 
     rows = list_scenes()
     print(f"{'name':<10} {'floor area (m^2)':>16} {'rooms':>6}  description")
@@ -41,9 +41,9 @@ def cmd_scene_list(args: argparse.Namespace) -> int:
 
 
 def cmd_scene_export(args: argparse.Namespace) -> int:
-    from .scene import load_scene
-    from .scene.export import export_glb
-    from .validation import check_output_file
+    from ..scene import load_scene
+    from ..scene.export import export_glb
+    from ..validation import check_output_file
 
     check_output_file(args.out, "scene export OUT")
     scene = load_scene(args.name, seed=args.seed)
@@ -55,13 +55,13 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .geometry import Intrinsics, world_from_cam_pose
-    from .markers import load_markers
-    from .render.renderer import Renderer
-    from .render.views import default_pose, write_render_outputs
-    from .scene import load_scene
-    from .validation import check_output_file, check_pose_in_scene, check_render_sees_something
-    from .worldframe import markers_to_internal, points_to_internal, world_offset
+    from ..geometry import Intrinsics, world_from_cam_pose
+    from ..markers import load_markers
+    from ..render.renderer import Renderer
+    from ..render.views import default_pose, write_render_outputs
+    from ..scene import load_scene
+    from ..validation import check_output_file, check_pose_in_scene, check_render_sees_something
+    from ..scene.worldframe import markers_to_internal, points_to_internal, world_offset
 
     pose = _parse_pose(args.pose) if args.pose else None
     check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
@@ -87,19 +87,19 @@ def cmd_render(args: argparse.Namespace) -> int:
 def _parse_xy(text: str | None):
     if text is None:
         return None
-    from .validation import COORDINATE, parse_floats
+    from ..validation import COORDINATE, parse_floats
 
     return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
 
 
 def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
     """``config`` with ``--start`` moved into the scene's internal frame
-    (:mod:`markerplace.worldframe`), after the run-size guard
+    (:mod:`markerplace.scene.worldframe`), after the run-size guard
     (:func:`markerplace.validation.check_run_size`; ``force`` = ``--force``)."""
     from dataclasses import replace
 
-    from .validation import check_run_size, estimate_run
-    from .worldframe import points_to_internal, world_offset
+    from ..validation import check_run_size, estimate_run
+    from ..scene.worldframe import points_to_internal, world_offset
 
     offset = world_offset(scene)
     if config.discretize.start is not None and offset.any():
@@ -123,12 +123,12 @@ def _parse_level(text: str):
 
 
 def plan_config_from_args(args: argparse.Namespace):
-    """Build a :class:`~markerplace.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
+    """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
     from dataclasses import replace
 
-    from .discretize import DiscretizeConfig
-    from .observe import ObserveConfig
-    from .planner import PlacementConfig, PlanConfig
+    from ..plan.discretize import DiscretizeConfig
+    from ..plan.observe import ObserveConfig
+    from ..plan.planner import PlacementConfig, PlanConfig
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=_parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
@@ -140,12 +140,12 @@ def plan_config_from_args(args: argparse.Namespace):
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from .markers import check_markers_on_walls, load_markers
-    from .observe import SceneSpec
-    from .planner import first_pick_gain, place, prepare, validate
-    from .report.plan_outputs import write_plan_outputs
-    from .validation import check_output_dir
-    from .worldframe import markers_to_internal, world_offset
+    from ..markers import check_markers_on_walls, load_markers
+    from ..plan.observe import SceneSpec
+    from ..plan.planner import first_pick_gain, place, prepare, validate
+    from ..report.plan_outputs import write_plan_outputs
+    from ..validation import check_output_dir
+    from ..scene.worldframe import markers_to_internal, world_offset
 
     config = plan_config_from_args(args)
     validate(config)
@@ -235,11 +235,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
-    from .evaluate_cli import add_evaluate_parser
+    from .evaluate import add_evaluate_parser
 
     add_evaluate_parser(sub)
 
-    from .scan.cli import add_scan_parsers
+    from .scan import add_scan_parsers
 
     add_scan_parsers(sub, p_export)  # `fuse` and `scene export ... --as-scan`
 
@@ -258,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        from .validation import check_args
+        from ..validation import check_args
 
         check_args(args)  # every numeric option of every subcommand: finite and in range
         return int(func(args) or 0)
@@ -268,7 +268,3 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("markerplace: interrupted", file=sys.stderr)
         return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

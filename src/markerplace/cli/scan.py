@@ -1,6 +1,6 @@
 """Command line of the scan package: ``markerplace fuse`` and ``scene export ... --as-scan``.
 
-:func:`add_scan_parsers` is the only hook into :mod:`markerplace.cli`: it adds the ``fuse``
+:func:`add_scan_parsers` is the only hook into :mod:`markerplace.cli.main`: it adds the ``fuse``
 subcommand and the ``--as-scan``, ``--voxel`` and ``--keep-frames`` options of ``scene export``
 (wrapping that command so it still writes glTF without ``--as-scan``).
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import UserError
 
-log = logging.getLogger("markerplace.cli")
+log = logging.getLogger("markerplace.cli.main")
 
 FUSE_DEFAULTS = {"voxel": 0.02, "trunc": "4x", "depth_max": 4.0, "every": 1}
 
@@ -35,7 +35,7 @@ def _check_ply(out: str, option: str) -> Path:
 
 def fuse_config_from_args(args: argparse.Namespace):
     """:class:`~markerplace.scan.fuse.FuseConfig` from ``fuse`` arguments (validated)."""
-    from .fuse import FuseConfig, parse_trunc
+    from ..scan.fuse import FuseConfig, parse_trunc
 
     trunc_m, trunc_voxels = parse_trunc(args.trunc)
     config = FuseConfig(voxel=args.voxel, trunc_m=trunc_m, trunc_voxels=trunc_voxels, depth_max=args.depth_max,
@@ -46,8 +46,8 @@ def fuse_config_from_args(args: argparse.Namespace):
 
 def cmd_fuse(args: argparse.Namespace) -> int:
     """``markerplace fuse FRAMES_DIR --out MESH.ply``."""
-    from .frames import open_frameset
-    from .fuse import fuse_frameset, write_mesh_ply
+    from ..scan.frames import open_frameset
+    from ..scan.fuse import fuse_frameset, write_mesh_ply
 
     out = _check_ply(args.out, "--out")
     config = fuse_config_from_args(args)
@@ -66,8 +66,8 @@ def cmd_scene_export_scan(args: argparse.Namespace) -> int:
     """``markerplace scene export NAME OUT.ply --as-scan [--voxel V] [--keep-frames DIR]``."""
     from ..scene import load_scene
     from ..scene.catalogue import builtin_names
-    from .fuse import write_mesh_ply
-    from .simulate import ScanConfig, simulate_scan
+    from ..scan.fuse import write_mesh_ply
+    from ..scan.simulate import ScanConfig, simulate_scan
 
     name = str(args.name).strip().lower()
     if name not in builtin_names():
@@ -142,6 +142,6 @@ def add_scan_export_args(p_export: argparse.ArgumentParser) -> None:
 
 
 def add_scan_parsers(sub, p_export: argparse.ArgumentParser) -> None:
-    """The hook called by :func:`markerplace.cli.build_parser`: ``fuse`` and ``scene export --as-scan``."""
+    """The hook called by :func:`markerplace.cli.main.build_parser`: ``fuse`` and ``scene export --as-scan``."""
     add_fuse_parser(sub)
     add_scan_export_args(p_export)

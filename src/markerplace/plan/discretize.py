@@ -4,13 +4,13 @@ The paper cuts one eye-level plane through the model and maps its free space wit
 grid. Real buildings have several storeys, steps and sunken rooms, and scans have holes, glass
 and clutter, so the stage is built from three parts:
 
-1. :mod:`markerplace.floorplan`: vertical rays find the storeys and, per storey, the floor a
+1. :mod:`markerplace.plan.floorplan`: vertical rays find the storeys and, per storey, the floor a
    person stands on (steps and sunken rooms included, furniture tops not, inside the building).
-2. :mod:`markerplace.freespace`: eye-level cross-sections give the obstacles; the free region
+2. :mod:`markerplace.plan.freespace`: eye-level cross-sections give the obstacles; the free region
    is the floor minus obstacles, opened so that scan holes narrower than a person do not leak;
    camera locations are lattice points in it (``grid_spacing`` apart, ``clearance`` from
    anything, ``height`` above their local floor), each with ``num_yaws`` level poses.
-3. :mod:`markerplace.wall_candidates`: range scans at eye level from the camera locations give
+3. :mod:`markerplace.plan.wall_candidates`: range scans at eye level from the camera locations give
    the wall spots; they are spaced uniformly along the free-space perimeter and kept where a
    flat tag fits (not on glass).
 
@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import geometry
-from .errors import UserError
+from .. import geometry
+from ..errors import UserError
 from .floorplan import FloorConfig, Grid, cast_columns, eye_level_support, find_storeys, storey_floor
 from .freespace import Sections, camera_locations, free_space, obstacle_mask
-from .io_utils import write_npz
-from .raycast import RayCaster
+from ..io_utils import write_npz
+from ..scene.raycast import RayCaster
 from .wall_candidates import CandidateConfig, wall_candidates
 
 log = logging.getLogger(__name__)
@@ -72,7 +72,7 @@ class DiscretizeConfig:
             cross-sections whose union blocks free space.
         passage_radius: gaps narrower than twice this (metres) do not connect free space.
         min_region_area: without ``start``, free regions smaller than this (m^2) are dropped.
-        floor: how storeys and floors are found (:class:`~markerplace.floorplan.FloorConfig`).
+        floor: how storeys and floors are found (:class:`~markerplace.plan.floorplan.FloorConfig`).
     """
 
     height: float = 1.5

@@ -1,8 +1,8 @@
 """Compiled kernel: per-pose sums of landmark information ``sum J^T S^-1 J`` (numba).
 
-This is the inner loop of :func:`markerplace.localizability.pose_information`, the planner's
+This is the inner loop of :func:`markerplace.plan.localizability.pose_information`, the planner's
 hot path (every feasible pose x up to ~1000 landmarks). The math is the closed form documented
-in :mod:`markerplace.localizability` (and tested against GTSAM there); this module only makes
+in :mod:`markerplace.plan.localizability` (and tested against GTSAM there); this module only makes
 it fast: one pass over the landmarks of each pose, the 2x6 whitened Jacobian kept in registers
 and the 21 distinct entries of the symmetric 6x6 sum accumulated as scalars, poses spread over
 threads with ``numba.prange``.

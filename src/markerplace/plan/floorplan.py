@@ -1,12 +1,12 @@
 """Where people can stand: storeys and per-storey floor maps of a model, from vertical rays.
 
 Vertical rays on a regular xy grid (one per cell) are cast down through the whole model with
-the ray engine (:class:`markerplace.raycast.RayCaster`), keeping every surface each ray crosses.
+the ray engine (:class:`markerplace.scene.raycast.RayCaster`), keeping every surface each ray crosses.
 A *standable surface* is a near-horizontal surface (face |n_z| >= ``min_floor_nz``, either face
 side: scans have inconsistent normals) with at least ``headroom`` metres of air above it up to
 the next surface. Its *ceiling* is that next surface when it is at most ``max_ceiling`` above.
 Walls are invisible to vertical rays; they come from horizontal cross-sections
-(:mod:`markerplace.freespace`).
+(:mod:`markerplace.plan.freespace`).
 
 Storeys
 -------
@@ -48,7 +48,7 @@ from typing import Callable
 
 import numpy as np
 
-from .raycast import RayCaster
+from ..scene.raycast import RayCaster
 
 log = logging.getLogger(__name__)
 

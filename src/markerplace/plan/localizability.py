@@ -24,7 +24,7 @@ pinhole projection ``pi``::
 Because ``Sigma_p`` is isotropic, ``P Sigma_p P^T = s D D^T`` with ``D = dpi/dp_c``; ``J`` is the
 classic interaction matrix. Each landmark's term is whitened (``A = L^-1 J`` with ``S = L L^T``).
 The per-pose sums ``sum A^T A`` over natural landmarks run in a compiled kernel
-(:mod:`markerplace.landmark_kernel`, one pass per pose, poses spread over threads); the few
+(:mod:`markerplace.plan.landmark_kernel`, one pass per pose, poses spread over threads); the few
 marker terms use the same whitening in numpy (:func:`_whitened_jacobians`).
 """
 
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import invert, marker_corners_local
+from ..geometry import invert, marker_corners_local
 from .landmark_kernel import landmark_information_sums
 
 log = logging.getLogger(__name__)

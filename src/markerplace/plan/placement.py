@@ -1,7 +1,7 @@
 """Marker placement: OMP greedy (plain and lazy), random and uniform baselines.
 
 The problem is given as information matrices: ``base_info`` (N, 6, 6), the information of every
-feasible camera pose without markers (see :mod:`markerplace.localizability`), and per candidate
+feasible camera pose without markers (see :mod:`markerplace.plan.localizability`), and per candidate
 marker m a :class:`MarkerCoverage`, the sparse set of poses that see it with the information
 ``M`` (6, 6) it adds there. Everything below is exact arithmetic on these arrays; no scene.
 
@@ -40,7 +40,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .errors import UserError
+from ..errors import UserError
 from .localizability import information_gain_whitened, whitening
 
 log = logging.getLogger(__name__)

@@ -28,9 +28,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .errors import UserError
-from .geometry import world_from_cam_poses
-from .io_utils import write_npz
+from ..errors import UserError
+from ..geometry import world_from_cam_poses
+from ..io_utils import write_npz
 
 TEST_SETS = ("weighted", "uniform")
 
@@ -331,7 +331,7 @@ class EvaluateConfig:
 
 def validate_evaluate_config(config: EvaluateConfig) -> None:
     """Raise :class:`UserError` (one line) for settings that cannot work."""
-    from .validation import check_evaluate_config
+    from ..validation import check_evaluate_config
 
     if not config.test_sets or any(t not in TEST_SETS for t in config.test_sets):
         raise UserError(f"--test-sets {','.join(config.test_sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")
@@ -360,7 +360,7 @@ class PlacementRun:
 def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
     """Move marker i along its wall (marker x axis) by ``s_i * shift`` metres, ``s_i = s0 (-1)^i``
     with a seeded random first sign ``s0``; orientation unchanged."""
-    from .markers import Marker
+    from ..markers import Marker
 
     if shift == 0.0 or not markers:
         return list(markers)
@@ -375,7 +375,7 @@ def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
 
 def scale_markers(markers: Sequence, scale: float) -> list:
     """Markers printed ``scale`` times their planned size (same centre and orientation)."""
-    from .markers import Marker
+    from ..markers import Marker
 
     if scale == 1.0:
         return list(markers)
@@ -387,8 +387,8 @@ def build_placements(data, placement_config, config: EvaluateConfig,
     """Every marker set to evaluate, in processing order.
 
     Args:
-        data: the planner's :class:`~markerplace.planner.PlanData` (one ``prepare``).
-        placement_config: the planner's :class:`~markerplace.planner.PlacementConfig` (v,
+        data: the planner's :class:`~markerplace.plan.planner.PlanData` (one ``prepare``).
+        placement_config: the planner's :class:`~markerplace.plan.planner.PlacementConfig` (v,
             marker model, tag size, similarity, placement seed).
         config: evaluation settings (methods, runs, ks, tag scale, shift).
         extra: method name -> ordered markers (e.g. from ``--placements``); evaluated at each k
@@ -399,7 +399,7 @@ def build_placements(data, placement_config, config: EvaluateConfig,
     """
     from dataclasses import replace
 
-    from .planner import place
+    from ..plan.planner import place
 
     ks = sorted(set(config.ks))
     runs: list[PlacementRun] = []

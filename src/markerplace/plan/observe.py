@@ -21,10 +21,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .geometry import Intrinsics, project_with_depth_lookup
-from .io_utils import atomic_path
-from .localization.features import SIFT_SCORING, SiftConfig, extract_sift, lift_to_3d
-from .workers import default_workers, single_threaded_libraries, spawn_pool
+from ..geometry import Intrinsics, project_with_depth_lookup
+from ..io_utils import atomic_path
+from ..localization.features import SIFT_SCORING, SiftConfig, extract_sift, lift_to_3d
+from ..runtime.workers import default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,7 @@ class SceneSpec:
     seed: int = 0
 
     def load(self):
-        from .scene import load_scene
+        from ..scene import load_scene
 
         return load_scene(self.spec, up=self.up, unit_scale=self.unit_scale, seed=self.seed)
 
@@ -137,7 +137,7 @@ _WORKER: dict = {}
 
 
 def _worker_init(scene_spec: SceneSpec, config: ObserveConfig, samples_world: np.ndarray) -> None:
-    from .render.renderer import Renderer
+    from ..render.renderer import Renderer
 
     scene = scene_spec.load()
     _WORKER["renderer"] = Renderer(scene, config.intrinsics)

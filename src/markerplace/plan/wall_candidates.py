@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from .floorplan import Grid, StoreyFloor
-from .raycast import RayCaster
+from ..scene.raycast import RayCaster
 
 log = logging.getLogger(__name__)
 
@@ -247,7 +247,7 @@ def wall_candidates(rc: RayCaster, face_transparent: np.ndarray, grid: Grid, sto
         face_transparent: (F,) bool per face of ``rc``.
         grid: the floor maps' grid.
         storeys: one ``(floor, free, locations)`` per storey: its
-            :class:`~markerplace.floorplan.StoreyFloor`, (H, W) bool free region and (L, 3)
+            :class:`~markerplace.plan.floorplan.StoreyFloor`, (H, W) bool free region and (L, 3)
             camera positions (eye level).
         config: settings.
     """

@@ -1,7 +1,7 @@
 """The OMP planning pipeline: discretize -> observe -> similarity -> score -> place.
 
 Each stage's artifact lives in the run directory with a hash of the inputs it came from
-(:mod:`markerplace.cache`), so re-running ``plan`` with a different k, method or v reuses the
+(:mod:`markerplace.runtime.cache`), so re-running ``plan`` with a different k, method or v reuses the
 expensive stages (rendering, SIFT, similarity) and only re-runs placement.
 """
 
@@ -15,11 +15,11 @@ from typing import Sequence
 
 import numpy as np
 
-from . import cache
+from ..runtime import cache
 from .discretize import DiscretizeConfig, Discretization, discretize
 from .discretize import load as load_discretization
 from .discretize import save as save_discretization
-from .errors import UserError
+from ..errors import UserError
 from .localizability import (
     NoiseConfig,
     entropy,
@@ -29,7 +29,7 @@ from .localizability import (
     marker_visibility,
     pose_information,
 )
-from .markers import DEFAULT_TAG_SIZE, FAMILY, Marker
+from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
 from .observe import ObserveConfig, Observations, SceneSpec, observe
 from .placement import MarkerCoverage, omp_greedy, random_placement, uniform_placement
 from .similarity import SimilarityConfig, count_similar
@@ -110,7 +110,7 @@ def validate(config: PlanConfig) -> None:
         raise UserError(f"--method {p.method!r} is not known: use one of {', '.join(METHODS)}")
     if p.marker_model not in MARKER_MODELS:
         raise UserError(f"--marker-model {p.marker_model!r} is not known: use one of {', '.join(MARKER_MODELS)}")
-    from .validation import check_plan_config
+    from ..validation import check_plan_config
 
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
 
@@ -204,7 +204,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
             log.info("similarity: reusing %s", sim_path)
         else:
             n_similar = count_similar(obs.descriptors, obs.points_world, config.similarity)
-            from .io_utils import write_npz
+            from ..io_utils import write_npz
 
             write_npz(sim_path, n_similar=n_similar)
             cache.mark_done(sim_path, sim_key)

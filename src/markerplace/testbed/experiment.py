@@ -3,7 +3,7 @@ build the map database and localize the test images, over a process pool.
 
 Work is spread over a ``spawn`` process pool; each worker owns one GL context (a
 :class:`~markerplace.render.renderer.Renderer` on the scene rebuilt from a
-:class:`~markerplace.observe.SceneSpec`).
+:class:`~markerplace.plan.observe.SceneSpec`).
 
 Re-use across placements (renders are deterministic): an image whose view contains no marker of
 a placement is identical to the no-marker image, so its features come from the *base* (no
@@ -30,11 +30,11 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from .geometry import Intrinsics, project_with_depth_lookup
-from .io_utils import atomic_path, write_npy
-from .localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
-from .markers import Marker
-from .workers import default_workers, single_threaded_libraries, spawn_pool
+from ..geometry import Intrinsics, project_with_depth_lookup
+from ..io_utils import atomic_path, write_npy
+from ..localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
+from ..markers import Marker
+from ..runtime.workers import default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ class FeatureSet:
 
 def marker_samples(markers: Sequence[Marker], grid: int = 7) -> np.ndarray:
     """(M, grid*grid, 3) world points on each marker's drawn quad (quiet zone included)."""
-    from .render.tags import outer_size
+    from ..render.tags import outer_size
 
     if not markers:
         return np.zeros((0, grid * grid, 3))
@@ -208,7 +208,7 @@ _W: dict = {}
 
 
 def _worker_init(scene_spec, config: TestbedConfig, samples: np.ndarray, localize_args: dict | None) -> None:
-    from .render.renderer import Renderer
+    from ..render.renderer import Renderer
 
     if mp.current_process().name != "MainProcess":
         single_threaded_libraries()  # parallelism is across worker processes
@@ -228,7 +228,7 @@ def _worker_close() -> None:
 
 
 def _render_extract(world_from_cam: np.ndarray, markers: Sequence[Marker], want_visibility: bool):
-    from .localization.tags import detect_tags
+    from ..localization.tags import detect_tags
 
     config: TestbedConfig = _W["config"]
     renderer = _W["renderer"]
@@ -271,7 +271,7 @@ def save_map(folder: str | Path, features: FeatureSet, world_from_cam: np.ndarra
              codebook_centres: np.ndarray) -> None:
     """Write everything a worker needs to build one placement's map database into ``folder``:
     the features, (N, 4, 4) map poses, the markers (JSON) and the (C, 128) VLAD centres."""
-    from .io_utils import write_json
+    from ..io_utils import write_json
 
     folder = Path(folder)
     features.save(folder)
@@ -284,9 +284,9 @@ def load_map_database(folder: str | Path):
     """Build the :class:`~markerplace.localization.database.MapDatabase` saved by :func:`save_map`."""
     import json
 
-    from .localization.database import MapDatabase
-    from .localization.vlad import VladCodebook
-    from .markers import marker_from_json
+    from ..localization.database import MapDatabase
+    from ..localization.vlad import VladCodebook
+    from ..markers import marker_from_json
 
     folder = Path(folder)
     feats = FeatureSet.load(folder, mmap=True)
@@ -301,7 +301,7 @@ def load_map_database(folder: str | Path):
 
 
 def _tag_detections(feats: ImageFeatures) -> list:
-    from .localization.tags import TagDetection
+    from ..localization.tags import TagDetection
 
     return [TagDetection(int(t), np.asarray(c, np.float64), np.asarray(c, np.float64).mean(axis=0))
             for t, c in zip(feats.tag_ids, feats.tag_corners)]
@@ -317,7 +317,7 @@ def _localize_job(job):
 
     With ``features`` None the query is first rendered here with ``markers``.
     """
-    from .localization.localizer import Localizer
+    from ..localization.localizer import Localizer
 
     key, folder, feats, world_from_cam, markers = job
     if _W.get("db_folder") != folder:
@@ -344,7 +344,7 @@ class Testbed:
         union_markers: every marker any evaluated placement uses (for the in-view test).
         progress: tqdm bars.
         localize_args: picklable settings the workers need to build databases and localize
-            (passed to :mod:`markerplace.testbed` worker functions).
+            (passed to :mod:`markerplace.testbed.experiment` worker functions).
     """
 
     def __init__(self, scene_spec, config: TestbedConfig, union_markers: Sequence[Marker],
@@ -440,7 +440,7 @@ class BaseImages:
 
     def __init__(self, testbed: Testbed, world_from_cam: np.ndarray, folder: Path, key: str, map_only: bool,
                  name: str):
-        from . import cache
+        from ..runtime import cache
 
         self.folder = Path(folder)
         from dataclasses import replace
@@ -482,7 +482,7 @@ def _load_errors(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _localizer_config(config):
-    from .localization.localizer import LocalizerConfig
+    from ..localization.localizer import LocalizerConfig
 
     return LocalizerConfig(use_tags=config.use_tags, tag_corners=config.tag_corners, seed=config.seed)
 
@@ -492,9 +492,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
-        scene_spec: :class:`~markerplace.observe.SceneSpec` of the scene.
-        plan_config: :class:`~markerplace.planner.PlanConfig` (discretization, scoring, v, ...).
-        config: :class:`~markerplace.evaluation.EvaluateConfig`.
+        scene_spec: :class:`~markerplace.plan.observe.SceneSpec` of the scene.
+        plan_config: :class:`~markerplace.plan.planner.PlanConfig` (discretization, scoring, v, ...).
+        config: :class:`~markerplace.testbed.evaluation.EvaluateConfig`.
         out_dir: run directory: planner artifacts (``plan/``), caches (``cache/``) and the
             outputs ``recall.csv``, ``query_errors.npz``, ``tables.md``, ``recall_vs_k.png``,
             ``timings.json``, ``config.json``, ``test_poses_<set>.npz``.
@@ -511,11 +511,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     import time
     from dataclasses import replace
 
-    from . import cache
+    from ..runtime import cache
     from . import evaluation as ev
-    from .io_utils import write_json, write_npz
-    from .markers import load_markers
-    from .planner import prepare, validate
+    from ..io_utils import write_json, write_npz
+    from ..markers import load_markers
+    from ..plan.planner import prepare, validate
 
     t_all = time.perf_counter()
     ev.validate_evaluate_config(config)
@@ -539,7 +539,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     t0 = time.perf_counter()
     extra = {}
     if placements_dir is not None:
-        from .worldframe import markers_to_internal, world_offset
+        from ..scene.worldframe import markers_to_internal, world_offset
 
         # placement files are in the user's (file) frame; the scene may be recentred
         extra = {name: markers_to_internal(load_markers(p), world_offset(scene))
@@ -582,7 +582,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         t0 = time.perf_counter()
         codebook_path = cache_dir / "vlad_codebook.npz"
         cb_key = cache.hash_of("vlad-v1", base_key, tb_key_cfg, config.vlad_clusters, config.seed)
-        from .localization.vlad import VladCodebook
+        from ..localization.vlad import VladCodebook
 
         codebook = cache.load_fresh(codebook_path, cb_key, VladCodebook.load)
         if codebook is None:
@@ -658,11 +658,11 @@ def write_outputs(out: Path, scene_name: str, placements, results: dict, test_po
                   config, plan_config) -> list[dict]:
     """recall.csv, query_errors.npz, tables.md, recall_vs_k.png and config.json."""
     from . import evaluation as ev
-    from .cache import config_dict
-    from .io_utils import write_json, write_npz
-    from .report.figures import recall_vs_k
-    from .report.paired import paired_markdown
-    from .report.tables import recall_curves, tables_markdown, write_recall_csv
+    from ..runtime.cache import config_dict
+    from ..io_utils import write_json, write_npz
+    from ..report.figures import recall_vs_k
+    from ..report.paired import paired_markdown
+    from ..report.tables import recall_curves, tables_markdown, write_recall_csv
 
     labels = [ev.threshold_label(t) for t in config.thresholds]
     rows = []

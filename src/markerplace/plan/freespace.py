@@ -4,7 +4,7 @@ Obstacles are the model's horizontal cross-sections at a few heights around the 
 level (``slice_offsets`` metres from the eye-level plane ``floor + height``), rasterized on the
 floor map's grid: walls, glass, shelves, door frames. Several cuts close thin gaps in a scanned
 wall that one cut would slip through. Free cells are cells inside the building at eye level
-(:func:`markerplace.floorplan.eye_level_support`: floor or furniture below, a ceiling above)
+(:func:`markerplace.plan.floorplan.eye_level_support`: floor or furniture below, a ceiling above)
 that no cut covers; as in the paper's single cut, a desk below eye level is free space (but no
 camera stands on it).
 
@@ -105,7 +105,7 @@ def free_space(grid: Grid, support: np.ndarray, obstacle: np.ndarray, *, passage
     Args:
         grid: the floor map's grid.
         support: (H, W) bool cells inside the building at eye level
-            (:func:`markerplace.floorplan.eye_level_support`).
+            (:func:`markerplace.plan.floorplan.eye_level_support`).
         obstacle: (H, W) bool eye-level obstacles.
         passage_radius: half the narrowest passage a person takes, metres.
         min_region_area: without ``start``, pieces smaller than this (m^2) are dropped.

@@ -1,0 +1,1 @@
+"""Planning: discretize -> observe -> similarity -> score -> place (the OMP pipeline)."""

@@ -1,0 +1,1 @@
+"""Running stages: cached artifacts and the executors that spread per-image work."""

@@ -1,0 +1,1 @@
+"""The simulation testbed: test poses, map databases per placement, localization, recall."""
