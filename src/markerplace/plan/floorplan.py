@@ -251,7 +251,7 @@ def _peaks(z: np.ndarray, cell_area: float, bin_w: float = 0.05, radius: float =
         b = int(np.argmax(remaining))
         if remaining[b] <= 0:
             break
-        fz = round(float(np.median(z[np.abs(z - centres[b]) <= radius])), 3)
+        fz = round(float(np.median(z[np.abs(z - centres[b]) <= radius])), 3) + 0.0  # no -0.0
         peaks.append((fz, float((np.abs(z - fz) <= radius).sum() * cell_area)))
         gone = np.abs(centres - fz) <= radius + bin_w
         gone[b] = True
