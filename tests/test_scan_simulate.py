@@ -13,8 +13,9 @@ from markerplace.cli.main import main
 from markerplace.geometry import world_from_cam_pose
 from markerplace.scene.raycast import RayCaster
 from markerplace.scan.frames import open_frameset, load_frame
-from markerplace.scan.simulate import (DepthNoiseConfig, FrameSimulator, ScanConfig, WalkConfig, distance_to_scene,
-                                       find_doorways, noisy_depth, plan_walk, world_from_cam_ypr)
+from markerplace.scan.depth_noise import DepthNoiseConfig, noisy_depth
+from markerplace.scan.simulate import FrameSimulator, ScanConfig, distance_to_scene
+from markerplace.scan.walk import WalkConfig, find_doorways, plan_walk, world_from_cam_ypr
 from markerplace.scene import MeshPart, Room, Scene, load_scene
 
 

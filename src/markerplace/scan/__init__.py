@@ -1,7 +1,12 @@
 """RGB-D in, mesh out: TSDF fusion of posed RGB-D frames, and simulated scans of the built-in scenes.
 
-* :mod:`.frames`: the markerplace and TUM RGB-D frame layouts (reading, writing, validation);
+* :mod:`.frameset`: frame-set types, pose checks, ``intrinsics.json`` (shared by both layouts);
+* :mod:`.frames`: the markerplace frame layout (reading, writing) and ``open_frameset`` for either layout;
+* :mod:`.tum`: the TUM RGB-D layout (reading, timestamp association);
 * :mod:`.fuse`: TSDF fusion and marching cubes into a vertex-coloured mesh;
-* :mod:`.simulate`: a scanning walk through a built-in scene with a depth-sensor noise model;
-* :mod:`.cli`: the ``markerplace fuse`` command and ``scene export --as-scan``.
+* :mod:`.walk`: the scanning walk through a built-in scene (positions, doorways, poses);
+* :mod:`.depth_noise`: the depth-sensor noise model (Kinect-like: noise, quantization, dropouts);
+* :mod:`.simulate`: the frame simulator and the whole simulated scan (walk, frames, fusion).
+
+The ``markerplace fuse`` command and ``scene export --as-scan`` live in :mod:`markerplace.cli.scan`.
 """

@@ -203,7 +203,7 @@ def canonical_mesh(mesh):
 
 
 def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
-    """Fuse every ``config.every``-th frame of a :class:`~markerplace.scan.frames.FrameSet`.
+    """Fuse every ``config.every``-th frame of a :class:`~markerplace.scan.frameset.FrameSet`.
 
     Returns:
         the legacy Open3D mesh of :meth:`TSDFFusion.extract_mesh`.
