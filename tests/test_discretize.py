@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from markerplace import geometry
-from markerplace.plan.discretize import DiscretizeConfig, discretize, load, save
+from markerplace.plan.discretization import load, save
+from markerplace.plan.discretize import DiscretizeConfig, discretize
 from markerplace.errors import UserError
 from markerplace.scene.types import MeshPart, Room, Scene
 

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .floorplan import Grid, StoreyFloor
+from .floorplan import StoreyFloor
+from .grid import Grid
 
 log = logging.getLogger(__name__)
 

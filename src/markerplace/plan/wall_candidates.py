@@ -29,7 +29,8 @@ from typing import Callable
 
 import numpy as np
 
-from .floorplan import Grid, StoreyFloor
+from .floorplan import StoreyFloor
+from .grid import Grid
 from ..scene.raycast import RayCaster
 
 log = logging.getLogger(__name__)
