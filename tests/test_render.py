@@ -8,7 +8,8 @@ import pytest
 
 from markerplace.geometry import Intrinsics, invert, project, transform_points, world_from_cam_pose, world_from_marker_pose
 from markerplace.markers import Marker
-from markerplace.render.renderer import RenderResult, Renderer, projection_matrix
+from markerplace.render.gl_resources import projection_matrix
+from markerplace.render.renderer import RenderResult, Renderer
 from markerplace.render.tags import outer_size
 from markerplace.render.views import default_pose, write_render_outputs
 from markerplace.scene.types import MeshPart, Room, Scene

@@ -8,7 +8,7 @@ import pytest
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, project, world_from_cam_pose, world_from_marker_pose
 from markerplace.markers import Marker
-from markerplace.render import renderer as renderer_mod
+from markerplace.render import gl_resources
 from markerplace.render.renderer import Renderer
 from markerplace.localization.tags import make_detector
 from markerplace.render.tags import PUPIL_TO_MARKER_CORNERS, QUIET_BITS, TAG_BITS, outer_size, tag_image
@@ -93,7 +93,7 @@ def test_missing_egl_raises_user_error_with_hint(monkeypatch):
         Renderer(grey_wall())
     assert "libegl1" in str(err.value) and "make setup" in str(err.value)
     assert "\n" not in str(err.value)
-    assert renderer_mod.EGL_HINT in str(err.value)
+    assert gl_resources.EGL_HINT in str(err.value)
 
 
 def test_detector_is_destroyed_before_its_tag_families():

@@ -11,8 +11,8 @@ Scene upload: parts are grouped by texture object (parts sharing one texture arr
 GL texture and one vertex buffer); base colour and vertex colour are baked into a per-vertex
 colour; meshes are de-indexed so parts without normals get exact flat face normals. Markers are
 extra textured quads (tag image with white quiet zone, nearest-neighbour magnification) lifted
-``MARKER_OFFSET`` metres off the wall along their normal; :meth:`Renderer.set_markers` replaces
-them without touching the scene buffers.
+:data:`~markerplace.render.vertices.MARKER_OFFSET` metres off the wall along their normal;
+:meth:`Renderer.set_markers` replaces them without touching the scene buffers.
 
 Transparent parts (``MeshPart.transparent``, glass) are drawn after everything opaque, far to
 near by part centroid, alpha-blended into the RGB image only (opacity
@@ -21,6 +21,11 @@ depth writes off. Depth and normals are therefore those of what lies behind the 
 time-of-flight or stereo depth camera mostly reports through clear glass, and the colour shows
 that surface tinted by the glass; glass seen with nothing behind it blends over black with depth
 0. Outputs without RGB skip the glass pass.
+
+Here: :class:`Renderer` (scene upload, markers, drawing, read-back) and :class:`RenderResult`.
+The GL context, projection, textures, programs and vertex arrays are made by
+:mod:`markerplace.render.gl_resources`; the vertex records of parts and marker quads by
+:mod:`markerplace.render.vertices`.
 """
 
 from __future__ import annotations
@@ -31,31 +36,15 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from ..errors import UserError
 from ..geometry import Intrinsics, invert
 from ..markers import Marker
-from ..scene.transparency import OPAQUE_ALPHA, drawn_alpha
-from ..scene.types import MeshPart, Scene
-from . import shaders
-from .tags import outer_size, tag_image
+from ..scene.types import Scene
+from .gl_resources import build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
+from .vertices import marker_vertices, part_vertices
 
 log = logging.getLogger(__name__)
 
-NEAR = 0.05
-"""Near clipping distance, metres."""
-FAR = 100.0
-"""Far clipping distance, metres."""
-MARKER_OFFSET = 0.004
-"""Distance (metres) a marker quad floats in front of its wall, along the marker normal."""
-TAG_PIXELS_PER_BIT = 16
-"""Texture resolution of marker images."""
-EGL_HINT = "install libegl1 libegl-mesa0 libgl1-mesa-dri, or run `make setup`"
-
-# Interleaved vertex layout: pos 3f, normal 3f, uv 2f, colour 4 x u8 (normalized).
-_VERTEX_DTYPE = np.dtype(
-    [("pos", "<f4", 3), ("normal", "<f4", 3), ("uv", "<f4", 2), ("color", "u1", 4)]
-)
-_ATTRS = (("in_pos", "3f", 12), ("in_normal", "3f", 12), ("in_uv", "2f", 8), ("in_color", "4f1", 4))
+__all__ = ["RenderResult", "Renderer"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,84 +64,6 @@ class RenderResult:
     depth: np.ndarray | None
     normal: np.ndarray | None
     world_from_cam: np.ndarray
-
-
-def projection_matrix(intrinsics: Intrinsics, near: float = NEAR, far: float = FAR) -> np.ndarray:
-    """(4, 4) clip-from-camera matrix for OpenCV intrinsics (camera x right, y down, z forward).
-
-    Image pixel u (centre at integer u) covers GL window x in [u, u + 1], so
-    x_ndc = 2 (u + 0.5) / W - 1. Likewise image row v maps to GL window row v (not flipped), so
-    ``fbo.read`` returns image row 0 first. Depth: z = near -> -1, z = far -> +1, w = z.
-    """
-    W, H = intrinsics.width, intrinsics.height
-    P = np.zeros((4, 4))
-    P[0, 0] = 2.0 * intrinsics.fx / W
-    P[0, 2] = 2.0 * (intrinsics.cx + 0.5) / W - 1.0
-    P[1, 1] = 2.0 * intrinsics.fy / H
-    P[1, 2] = 2.0 * (intrinsics.cy + 0.5) / H - 1.0
-    P[2, 2] = (far + near) / (far - near)
-    P[2, 3] = -2.0 * far * near / (far - near)
-    P[3, 2] = 1.0
-    return P
-
-
-def create_context():
-    """Standalone moderngl context on EGL. Raises :class:`UserError` with an install hint if it fails."""
-    try:
-        import moderngl
-
-        return moderngl.create_standalone_context(backend="egl")
-    except Exception as exc:  # missing libEGL, no driver, ...
-        raise UserError(f"cannot create an OpenGL context on EGL ({exc.__class__.__name__}: {exc}): {EGL_HINT}") from exc
-
-
-def _triangles(part: MeshPart) -> np.ndarray:
-    """De-indexed (3 M,) vertex records of one part (see ``_VERTEX_DTYPE``)."""
-    faces = np.asarray(part.faces, dtype=np.int64)
-    verts = np.asarray(part.vertices, dtype=np.float64)
-    corner = faces.reshape(-1)
-    out = np.zeros(len(corner), dtype=_VERTEX_DTYPE)
-    out["pos"] = verts[corner]
-    if part.normals is not None:
-        out["normal"] = np.asarray(part.normals, dtype=np.float32)[corner]
-    else:
-        tri = verts[faces]
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        norm = np.linalg.norm(n, axis=1, keepdims=True)
-        n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-300), np.array([0.0, 0.0, 1.0]))
-        out["normal"] = np.repeat(n, 3, axis=0)
-    if part.uv is not None and part.texture is not None:
-        uv = np.asarray(part.uv, dtype=np.float32)[corner]
-        # Scene uv: (0, 0) = bottom-left of the image as displayed; GL t = 0 is image row 0 (top).
-        out["uv"][:, 0] = uv[:, 0]
-        out["uv"][:, 1] = 1.0 - uv[:, 1]
-    base = np.clip(np.asarray(part.base_color, dtype=np.float64), 0.0, 1.0)
-    if part.colors is not None:
-        col = np.asarray(part.colors, dtype=np.float64)[corner] / 255.0 * base
-    else:
-        col = np.broadcast_to(base, (len(corner), 4))
-    if part.transparent:  # glass: its opacity, at most about 0.3 unless its colour says less
-        col = np.array(col)
-        col[:, 3] = np.where((col[:, 3] > 0) & (col[:, 3] < OPAQUE_ALPHA), col[:, 3], drawn_alpha(1.0))
-    out["color"] = np.round(col * 255.0).astype(np.uint8)
-    return out
-
-
-def _marker_triangles(marker: Marker) -> np.ndarray:
-    """(6,) vertex records of a marker quad (two triangles) in the world frame."""
-    h = outer_size(marker.size) / 2.0
-    # Marker frame: x viewer's right, y up, z out of the wall. Image row 0 (GL t = 0) at +y.
-    local = np.array([[-h, h], [h, h], [h, -h], [-h, -h]])
-    st = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    T = np.asarray(marker.world_from_marker, dtype=np.float64)
-    pts = np.column_stack([local, np.full(4, MARKER_OFFSET)]) @ T[:3, :3].T + T[:3, 3]
-    idx = [0, 3, 2, 0, 2, 1]  # counter-clockwise seen from +z
-    out = np.zeros(6, dtype=_VERTEX_DTYPE)
-    out["pos"] = pts[idx]
-    out["normal"] = T[:3, 2]
-    out["uv"] = st[idx]
-    out["color"] = 255
-    return out
 
 
 class Renderer:
@@ -221,14 +132,14 @@ class Renderer:
             key = id(part.texture) if (part.texture is not None and part.uv is not None) else 0
             textures[key] = part.texture if key else None
             if part.transparent:
-                glass.append((key, _triangles(part)))
+                glass.append((key, part_vertices(part)))
             else:
-                groups.setdefault(key, []).append(_triangles(part))
+                groups.setdefault(key, []).append(part_vertices(part))
         uploaded: dict[int, object] = {0: self._white}
 
         def texture_of(key: int):
             if key not in uploaded:
-                uploaded[key] = self._upload_texture(textures[key])
+                uploaded[key] = upload_texture(ctx, textures[key], mipmaps=self._mipmaps, anisotropy=self._anisotropy)
             return uploaded[key]
 
         self._scene_draws = []  # (texture, vbo, n_vertices)
@@ -255,42 +166,10 @@ class Renderer:
             ctx.info.get("GL_RENDERER", "?"),
         )
 
-    def _upload_texture(self, image: np.ndarray):
-        import moderngl
-
-        img = np.ascontiguousarray(image)
-        if img.ndim == 2:
-            img = np.repeat(img[:, :, None], 3, axis=2)
-        if img.dtype != np.uint8:
-            raise UserError(f"scene texture has dtype {img.dtype}: textures must be uint8 RGB")
-        img = img[:, :, :3]
-        max_size = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        step = int(np.ceil(max(img.shape[:2]) / max_size))
-        if step > 1:
-            log.warning("texture of %dx%d px exceeds the GL limit %d: subsampled by %d", img.shape[1], img.shape[0], max_size, step)
-            img = img[::step, ::step]
-        img = np.ascontiguousarray(img)
-        # Row 0 of the array goes to GL t = 0; texture coordinates are flipped accordingly.
-        tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), alignment=1)
-        if self._mipmaps:
-            tex.build_mipmaps()
-            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        else:
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        tex.anisotropy = self._anisotropy
-        return tex
-
     def _tag_texture(self, tag_id: int):
-        import moderngl
-
         tex = self._tag_textures.get(tag_id)
         if tex is None:
-            img = tag_image(tag_id, TAG_PIXELS_PER_BIT)
-            rgb = np.ascontiguousarray(np.repeat(img[:, :, None], 3, axis=2))
-            tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, rgb.tobytes(), alignment=1)
-            tex.build_mipmaps()
-            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.NEAREST)
-            tex.repeat_x = tex.repeat_y = False
+            tex = tag_texture(self.ctx, tag_id)
             self._tag_textures[tag_id] = tex
         return tex
 
@@ -303,17 +182,14 @@ class Renderer:
             self._vaos.pop(key).release()
         self._marker_draws = []
         for m in markers:
-            data = _marker_triangles(m)
+            data = marker_vertices(m)
             self._marker_draws.append((self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
         self.markers = tuple(markers)
 
     def _program(self, outputs: tuple[bool, bool, bool], alpha: bool = False):
         prog = self._programs.get((outputs, alpha))
         if prog is None:
-            prog = self.ctx.program(vertex_shader=shaders.VERTEX, fragment_shader=shaders.fragment(*outputs, alpha=alpha))
-            prog["proj"].write(self._proj.T.tobytes())
-            if "tex" in prog:
-                prog["tex"].value = 0
+            prog = build_program(self.ctx, self._proj, outputs, alpha)
             self._programs[(outputs, alpha)] = prog
         return prog
 
@@ -329,14 +205,7 @@ class Renderer:
         key = (kind, index, outputs)
         vao = self._vaos.get(key)
         if vao is None:
-            fmt, names = [], []
-            for name, f, nbytes in _ATTRS:
-                if name in prog:
-                    fmt.append(f)
-                    names.append(name)
-                else:
-                    fmt.append(f"{nbytes}x")
-            vao = self.ctx.vertex_array(prog, [(vbo, " ".join(fmt), *names)])
+            vao = vertex_array(self.ctx, prog, vbo)
             self._vaos[key] = vao
         return vao
 

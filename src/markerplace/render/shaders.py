@@ -5,7 +5,7 @@ normal), so a pass that needs only depth skips texture sampling and lighting.
 
 Vertex attributes (world frame): ``in_pos`` (3f, metres), ``in_normal`` (3f), ``in_uv`` (2f, GL
 texture coordinates: t = 0 is image row 0), ``in_color`` (4 x u8 normalized, base colour x vertex
-colour). Uniforms: ``proj`` (4x4, OpenCV intrinsics -> clip, see renderer.projection_matrix),
+colour). Uniforms: ``proj`` (4x4, OpenCV intrinsics -> clip, see gl_resources.projection_matrix),
 ``cam_from_world`` (4x4), ``cam_pos`` (3, world).
 """
 
