@@ -17,6 +17,7 @@ try:
     from markerplace import validation
 except ImportError:  # a version without it: its tests must fail, the CLI tests still run
     validation = None
+from markerplace import size_guard
 from markerplace.errors import UserError
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
@@ -237,22 +238,22 @@ def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
     assert main(["plan", "tiny", "-k", "1", "--out", str(out), *FAST]) == 0
     poses = json.loads((out / "placement.json").read_text())["summary"]["num_poses"]
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=4))
-    est = validation.estimate_run(load_scene("tiny"), config)
+    est = size_guard.estimate_run(load_scene("tiny"), config)
     assert poses <= est.poses <= 4 * poses
-    assert est.seconds == pytest.approx(est.poses * validation.SECONDS_PER_POSE_CORE / est.workers)
+    assert est.seconds == pytest.approx(est.poses * size_guard.SECONDS_PER_POSE_CORE / est.workers)
 
 
 def test_size_guard_limits_and_force(caplog):
-    est = validation.RunEstimate(footprint_m2=100.0, poses=50_000, memory_bytes=50e9, seconds=3600.0, workers=2)
+    est = size_guard.RunEstimate(footprint_m2=100.0, poses=50_000, memory_bytes=50e9, seconds=3600.0, workers=2)
     with pytest.raises(UserError, match=r"50,000 camera poses.*more memory than this machine has \(16.0 GiB\).*--force"):
-        validation.check_run_size(est, memory_bytes=16 * 2**30)
-    validation.check_run_size(est, memory_bytes=128 * 2**30)  # fits a bigger machine
+        size_guard.check_run_size(est, memory_bytes=16 * 2**30)
+    size_guard.check_run_size(est, memory_bytes=128 * 2**30)  # fits a bigger machine
     with pytest.raises(UserError, match="longer than 0.5 h"):
-        validation.check_run_size(est, limits=validation.SizeLimits(max_hours=0.5), memory_bytes=128 * 2**30)
+        size_guard.check_run_size(est, limits=size_guard.SizeLimits(max_hours=0.5), memory_bytes=128 * 2**30)
     import logging
 
     with caplog.at_level(logging.WARNING):
-        validation.check_run_size(est, force=True, memory_bytes=16 * 2**30)
+        size_guard.check_run_size(est, force=True, memory_bytes=16 * 2**30)
     assert "--force" in caplog.text
 
 
@@ -270,8 +271,8 @@ def test_size_guard_counts_storeys_of_level_all():
     from markerplace.scene import load_scene
 
     house = load_scene("house")  # two storeys
-    every = validation.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=None)))
-    one = validation.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=0)))
+    every = size_guard.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=None)))
+    one = size_guard.estimate_run(house, PlanConfig(discretize=replace(DiscretizeConfig(), level=0)))
     assert every.storeys == 2 and one.storeys == 1 and every.poses == 2 * one.poses
-    assert validation.estimate_run(load_scene("tiny"), PlanConfig()).storeys == 1
+    assert size_guard.estimate_run(load_scene("tiny"), PlanConfig()).storeys == 1
     assert "x 2 storeys" in every.describe()

@@ -13,7 +13,8 @@ from markerplace.scene import load_scene
 from markerplace.scene.catalogue import build_builtin, builtin_names, get_layout, list_scenes
 from markerplace.scene.textures import BUNDLED_PHOTOS, bundled_photo
 
-AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15), "house": (120, 170)}
+AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15), "house": (120, 170),
+               "campus": (2000, 2200)}
 EYE = 1.5
 
 

@@ -1,38 +1,27 @@
-"""Checks of user input before any work starts: option values, output paths and run size.
+"""Checks of option values before any work starts: every numeric option has one bound.
 
 Everything here raises :class:`~markerplace.errors.UserError` (one line, exit code 2) and runs
 in milliseconds, before the expensive stages.
 
-* **Option values.** Every numeric command-line option has one :class:`Bound` (finite, in a
-  range, with its unit and an example) in :data:`BOUNDS`; :func:`check_args` applies them to a
-  parsed command line (called once by :func:`markerplace.cli.main.main` for every subcommand), and
-  :func:`check_plan_config` / :func:`check_evaluate_config` apply the same bounds to the
-  library's config objects. :func:`parse_floats` and :func:`parse_int_list` parse the
-  comma-separated options (``--pose``, ``--start``, ``--k``).
-* **Output paths.** :func:`check_output_dir` (``--out`` of ``plan``/``evaluate``) and
-  :func:`check_output_file` (``render --out PREFIX``, ``scene export OUT``) prove the place is
-  writable with a real test write in it or in the nearest existing folder above it
-  (``os.access`` says yes to root even on read-only folders); they create nothing, so a refused
-  run leaves no empty folder behind.
-* **Run size.** :func:`estimate_run` estimates the camera poses (an upper bound from the
-  model's footprint), the peak memory and the wall-clock time of a ``plan``/``evaluate`` run
-  from the costs measured on the reference machine (README, Benchmarks); :func:`check_run_size`
-  refuses, with the numbers and the ``--force`` flag, a run over :class:`SizeLimits`.
+Every numeric command-line option has one :class:`Bound` (finite, in a range, with its unit and
+an example) in :data:`BOUNDS`; :func:`check_args` applies them to a parsed command line (called
+once by :func:`markerplace.cli.main.main` for every subcommand), and :func:`check_plan_config` /
+:func:`check_evaluate_config` apply the same bounds to the library's config objects.
+:func:`parse_floats` and :func:`parse_int_list` parse the comma-separated options (``--pose``,
+``--start``, ``--k``); :func:`check_pose_in_scene` and :func:`check_render_sees_something` refuse
+a ``render`` pose outside the model or seeing nothing of it. Lengths are metres, angles degrees.
+
+The other up-front checks: output paths in :mod:`markerplace.output_checks`, the run-size guard
+in :mod:`markerplace.size_guard`.
 """
 
 from __future__ import annotations
 
-import logging
 import math
-import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Sequence
 
 from .errors import UserError
-
-log = logging.getLogger(__name__)
 
 SEED_MAX = 2**32 - 1
 
@@ -90,8 +79,8 @@ def _fmt(v: float) -> str:
     return f"{v:g}"
 
 
-# Occupancy cell size of the discretization: finer camera or marker spacing means nothing.
-_CELL = 0.05
+OCCUPANCY_CELL = 0.05
+"""Occupancy cell size of the discretization, metres: finer camera or marker spacing means nothing."""
 
 UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
 SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
@@ -102,12 +91,12 @@ V = Bound("-v", 0.0, 100.0, "%", "a percentage such as 90")
 TAG_SIZE = Bound("--tag-size", 0.02, 3.0, "m", "the black-square edge in metres, e.g. 0.4")
 PLANE_HEIGHT = Bound("--height", 0.1, 10.0, "m", "the eye-level plane height above the floor in metres, e.g. 1.5")
 LEVEL = Bound("--level", 0, 1000, "", "a storey index, 0 = lowest", integer=True)
-GRID_SPACING = Bound("--grid-spacing", _CELL, 50.0, "m",
-                     f"the camera grid spacing in metres, e.g. 0.5 (not finer than the {_CELL:g} m occupancy grid)")
+GRID_SPACING = Bound("--grid-spacing", OCCUPANCY_CELL, 50.0, "m",
+                     f"the camera grid spacing in metres, e.g. 0.5 (not finer than the {OCCUPANCY_CELL:g} m occupancy grid)")
 CLEARANCE = Bound("--clearance", 0.0, 5.0, "m", "the distance of cameras from obstacles in metres, e.g. 0.3")
 YAWS = Bound("--yaws", 1, 360, "", "camera yaws per location, e.g. 8", integer=True)
-MARKER_SPACING = Bound("--marker-spacing", _CELL, 100.0, "m",
-                       f"the spacing of candidate markers in metres, e.g. 1.0 (not finer than {_CELL:g} m)")
+MARKER_SPACING = Bound("--marker-spacing", OCCUPANCY_CELL, 100.0, "m",
+                       f"the spacing of candidate markers in metres, e.g. 1.0 (not finer than {OCCUPANCY_CELL:g} m)")
 WORKERS = Bound("--workers", 0, 256, "", "0 (automatic) or a number of processes, e.g. 2", integer=True)
 IMAGE_WIDTH = Bound("--width", 16, 4096, "px", "an image width in pixels, e.g. 600", integer=True)
 IMAGE_HEIGHT = Bound("--height", 16, 4096, "px", "an image height in pixels, e.g. 450", integer=True)
@@ -264,239 +253,3 @@ def check_render_sees_something(result, pose_text: str | None) -> None:
         where = f"--pose {pose_text}" if pose_text else "the default pose"
         raise UserError(f"the camera at {where} sees nothing of the model (every pixel is empty): "
                         "give a pose inside the model, looking at its walls")
-
-
-# --- output paths --------------------------------------------------------------------------------
-
-def _first_file_above(path: Path) -> Path | None:
-    """The nearest existing ancestor of ``path`` (itself included) when it is not a folder."""
-    for p in (path, *path.parents):
-        if p.exists() or p.is_symlink():
-            return None if p.is_dir() else p
-    return None
-
-
-def _nearest_existing(path: Path) -> Path:
-    """``path`` or its nearest existing ancestor."""
-    for p in (path, *path.parents):
-        if p.exists():
-            return p
-    return Path(".")
-
-
-def _probe_write(path: Path, option: str) -> None:
-    """Create and delete a file in ``path``'s nearest existing folder (``path`` itself when it
-    exists): what is missing below it can then be created by the run itself."""
-    folder = _nearest_existing(path)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".markerplace-write-test-", dir=folder)
-    except OSError as err:
-        where = "" if folder == path else f" ({folder} is where it would be created)"
-        raise UserError(f"{option} {path}: cannot write there{where}: {err.strerror or err.__class__.__name__}; "
-                        "choose a writable folder") from None
-    os.close(fd)
-    try:
-        os.unlink(tmp)
-    except OSError:
-        pass
-
-
-def check_output_dir(path: str | os.PathLike, option: str = "--out") -> Path:
-    """Make sure ``path`` is, or can be created as, a writable folder (nothing is created).
-
-    Raises:
-        UserError: ``path`` or one of its parents is a file, or a test write into it (or into
-            the nearest existing folder above it) fails: read-only folder or file system, no
-            permission, disk full.
-    """
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise UserError(f"{option} {path} is an existing file, not a folder: give a folder path")
-    blocker = _first_file_above(path.parent)
-    if blocker is not None:
-        raise UserError(f"{option} {path}: {blocker} is a file, so no folder can be made under it; give another path")
-    _probe_write(path, option)
-    return path
-
-
-def check_output_file(path: str | os.PathLike, option: str, suffixes: Sequence[str] = ("",)) -> Path:
-    """Make sure files ``str(path) + suffix`` can be written: their folder is, or can be created
-    as, a writable folder, and none of them is an existing folder (nothing is created).
-
-    Raises:
-        UserError: a parent is a file, the folder cannot be written, or a target is a folder.
-    """
-    path = Path(path)
-    if str(path).endswith(("/", os.sep)) or path.name in ("", ".", ".."):
-        raise UserError(f"{option} {path}: give a file name (or prefix), not a folder")
-    for suffix in suffixes:
-        target = Path(str(path) + suffix)
-        if target.is_dir():
-            raise UserError(f"{option}: {target} is an existing folder; give a file name (or prefix)")
-    folder = path.parent
-    blocker = _first_file_above(folder)
-    if blocker is not None:
-        raise UserError(f"{option} {path}: {blocker} is a file, so it cannot hold {path.name}; give another path")
-    _probe_write(folder, option)
-    return path
-
-
-# --- run size --------------------------------------------------------------------------------------
-
-SECONDS_PER_POSE_CORE = 0.035
-"""Render + SIFT of one 600x450 pose on one core (README, Benchmarks: office, llvmpipe)."""
-BYTES_PER_POSE = 0.8e6
-"""Peak memory per camera pose of the main process (office: 1.55 GB for 1848 poses)."""
-BASE_BYTES = 0.4e9
-"""Main process without poses (libraries, scene)."""
-BYTES_PER_WORKER = 0.35e9
-"""One rendering worker (GL context, scene copy)."""
-BYTES_PER_GRID_CELL = 40.0
-"""Occupancy grid and its distance transforms per 5 cm cell of the model's bounding box."""
-SECONDS_PER_QUERY_CORE = 0.1
-"""Localizing one test image on one core (README, Results: room and office evaluations)."""
-
-
-STOREY_HEIGHT_M = 3.5
-"""Height per storey when guessing how many storeys ``--level all`` plans."""
-LARGE_FOOTPRINT_M2 = 10_000.0
-"""A refused run over this footprint also suggests ``--unit-scale`` (a model in cm looks 10^4 x larger)."""
-
-
-@dataclass(frozen=True)
-class SizeLimits:
-    """Largest run started without ``--force``.
-
-    Attributes:
-        max_poses: camera poses (estimated upper bound).
-        max_hours: estimated wall-clock hours.
-        memory_fraction: estimated peak memory as a fraction of the machine's memory.
-    """
-
-    max_poses: int = 200_000
-    max_hours: float = 12.0
-    memory_fraction: float = 0.8
-
-
-@dataclass(frozen=True)
-class RunEstimate:
-    """Estimated size of a run (see :func:`estimate_run`).
-
-    Attributes:
-        footprint_m2: area where cameras may stand on one storey (bounding box less the
-            clearance), m^2.
-        poses: camera poses, an upper bound (footprint / grid_spacing^2 x yaws x storeys).
-        memory_bytes: peak memory, bytes.
-        seconds: wall-clock time on ``workers`` processes.
-        workers: rendering processes.
-        queries: localized test images (``evaluate``; 0 for ``plan``).
-    """
-
-    footprint_m2: float
-    poses: int
-    memory_bytes: float
-    seconds: float
-    workers: int
-    queries: int = 0
-    storeys: int = 1
-
-    def describe(self) -> str:
-        where = f"{self.footprint_m2:.0f} m^2 footprint" + (f" x {self.storeys} storeys" if self.storeys > 1 else "")
-        text = (f"up to about {self.poses:,} camera poses ({where}), "
-                f"{_gib(self.memory_bytes)} of memory and {_duration(self.seconds)} on {self.workers} worker(s)")
-        if self.queries:
-            text += f" including {self.queries:,} test-image localizations"
-        return text
-
-
-def _gib(b: float) -> str:
-    return f"{b / 2**30:.1f} GiB"
-
-
-def _duration(s: float) -> str:
-    if s < 90:
-        return f"{s:.0f} s"
-    if s < 5400:
-        return f"{s / 60:.0f} min"
-    return f"{s / 3600:.1f} h"
-
-
-def machine_memory_bytes() -> float:
-    """Physical memory of this machine, or the cgroup limit when lower (bytes)."""
-    try:
-        total = float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        total = 8 * 2**30
-    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        try:
-            text = Path(limit_file).read_text().strip()
-        except OSError:
-            continue
-        if text.isdigit() and 0 < int(text) < total:
-            total = float(int(text))
-    return total
-
-
-def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0) -> RunEstimate:
-    """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
-
-    Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
-    by ``grid_spacing^2``, times the yaws, times the storeys planned (``--level N``: one;
-    ``--level all``: one per started 3.5 m of height above the first 0.5 m). An upper bound:
-    walls and furniture take space.
-    Memory and time use the per-pose costs measured on the reference machine (module
-    constants). ``evaluate`` adds a map re-render per placement with markers and one
-    localization per test image, test set and placement.
-    """
-    from .runtime.workers import default_workers
-
-    d = plan_config.discretize
-    lo, hi = scene.bounds
-    w = max(float(hi[0] - lo[0]) - 2 * d.clearance, 0.0)
-    h = max(float(hi[1] - lo[1]) - 2 * d.clearance, 0.0)
-    footprint = w * h
-    locations = (math.floor(w / d.grid_spacing) + 1) * (math.floor(h / d.grid_spacing) + 1) if footprint > 0 else 1
-    storeys = 1 if d.level is not None else max(1, math.ceil((float(hi[2] - lo[2]) - 0.5) / STOREY_HEIGHT_M))
-    poses = int(locations * d.num_yaws * storeys)
-    workers = default_workers(plan_config.observe.workers)
-    cells = (float(hi[0] - lo[0]) / _CELL + 20) * (float(hi[1] - lo[1]) / _CELL + 20)
-    memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
-    core_seconds = poses * SECONDS_PER_POSE_CORE
-    queries = 0
-    if evaluate_config is not None:
-        ks, methods = len(evaluate_config.ks), set(evaluate_config.methods)
-        with_markers = (ks if "omp" in methods else 0) + evaluate_config.runs * ks * len(methods & {"random", "uniform"}) \
-            + extra_placements
-        placements = with_markers + (1 if "none" in methods else 0)
-        queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
-        core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
-            + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE
-    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys)
-
-
-def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
-                   memory_bytes: float | None = None) -> None:
-    """Refuse a run over ``limits`` (unless ``force``), naming the numbers and the flag.
-
-    Raises:
-        UserError: estimated poses over ``max_poses``, time over ``max_hours`` or memory over
-            ``memory_fraction`` of ``memory_bytes`` (default: :func:`machine_memory_bytes`).
-    """
-    total = machine_memory_bytes() if memory_bytes is None else memory_bytes
-    reasons = []
-    if estimate.poses > limits.max_poses:
-        reasons.append(f"more than {limits.max_poses:,} poses")
-    if estimate.memory_bytes > limits.memory_fraction * total:
-        reasons.append(f"more memory than this machine has ({_gib(total)})")
-    if estimate.seconds > limits.max_hours * 3600:
-        reasons.append(f"longer than {limits.max_hours:g} h")
-    if not reasons:
-        log.info("run size: %s", estimate.describe())
-        return
-    if force:
-        log.warning("run size: %s (%s); going on because of --force", estimate.describe(), " and ".join(reasons))
-        return
-    units = ("; if the model is not in metres, pass --unit-scale (e.g. 0.01 for cm)"
-             if estimate.footprint_m2 > LARGE_FOOTPRINT_M2 else "")
-    raise UserError(f"this run needs {estimate.describe()}: {' and '.join(reasons)}; increase --grid-spacing or "
-                    f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway{units}")

@@ -53,7 +53,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..plan.observe import SceneSpec
     from ..plan.planner import validate
     from ..testbed.experiment import run_evaluation
-    from ..validation import check_output_dir
+    from ..output_checks import check_output_dir
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)

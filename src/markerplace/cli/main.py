@@ -42,8 +42,8 @@ def cmd_scene_list(args: argparse.Namespace) -> int:
 
 def cmd_scene_export(args: argparse.Namespace) -> int:
     from ..scene import load_scene
+    from ..output_checks import check_output_file
     from ..scene.export import export_glb
-    from ..validation import check_output_file
 
     check_output_file(args.out, "scene export OUT")
     scene = load_scene(args.name, seed=args.seed)
@@ -60,7 +60,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..render.renderer import Renderer
     from ..render.views import default_pose, write_render_outputs
     from ..scene import load_scene
-    from ..validation import check_output_file, check_pose_in_scene, check_render_sees_something
+    from ..output_checks import check_output_file
+    from ..validation import check_pose_in_scene, check_render_sees_something
     from ..scene.worldframe import markers_to_internal, points_to_internal, world_offset
 
     pose = _parse_pose(args.pose) if args.pose else None
@@ -95,10 +96,10 @@ def _parse_xy(text: str | None):
 def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
     """``config`` with ``--start`` moved into the scene's internal frame
     (:mod:`markerplace.scene.worldframe`), after the run-size guard
-    (:func:`markerplace.validation.check_run_size`; ``force`` = ``--force``)."""
+    (:func:`markerplace.size_guard.check_run_size`; ``force`` = ``--force``)."""
     from dataclasses import replace
 
-    from ..validation import check_run_size, estimate_run
+    from ..size_guard import check_run_size, estimate_run
     from ..scene.worldframe import points_to_internal, world_offset
 
     offset = world_offset(scene)
@@ -144,7 +145,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..plan.observe import SceneSpec
     from ..plan.planner import first_pick_gain, place, prepare, validate
     from ..report.plan_outputs import write_plan_outputs
-    from ..validation import check_output_dir
+    from ..output_checks import check_output_dir
     from ..scene.worldframe import markers_to_internal, world_offset
 
     config = plan_config_from_args(args)

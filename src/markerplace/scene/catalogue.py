@@ -1,8 +1,9 @@
 """Built-in scenes: layouts of the procedural interiors and a per-process cache of built scenes.
 
 Sizes follow the paper's scenes: office ~110 m^2, studio ~150 m^2, apartment ~300 m^2,
-room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests and the two-storey ``house`` (158 m^2,
-:mod:`.house`). Coordinates are metres, world z up; room
+room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests, the two-storey ``house`` (158 m^2,
+:mod:`.house`) and the two-storey office building ``campus`` for scale tests (2064 m^2,
+:mod:`.campus`). Coordinates are metres, world z up; room
 bounds are wall centre lines; furniture and pictures are in room-local coordinates.
 """
 
@@ -12,6 +13,7 @@ import functools
 
 from ..errors import UserError
 from .layout import Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .campus import build_campus, campus_plan
 from .house import Building, build_house, house_plan
 from .procedural import build_scene
 from .types import Scene
@@ -345,9 +347,10 @@ def _apartment() -> Layout:
     )
 
 
-_LAYOUTS = {"office": _office, "studio": _studio, "apartment": _apartment, "room": _room, "tiny": _tiny, "house": house_plan}
+_LAYOUTS = {"office": _office, "studio": _studio, "apartment": _apartment, "room": _room, "tiny": _tiny, "house": house_plan,
+            "campus": campus_plan}
 # multi-storey built-ins: their own builders (single-storey ones use procedural.build_scene)
-_BUILDERS = {"house": build_house}
+_BUILDERS = {"house": build_house, "campus": build_campus}
 
 
 def builtin_names() -> list[str]:

@@ -1,0 +1,181 @@
+"""The run-size guard: estimate a ``plan``/``evaluate`` run before it starts and refuse one too
+large for this machine unless ``--force``.
+
+:func:`estimate_run` estimates the camera poses (an upper bound from the model's footprint),
+the peak memory (bytes) and the wall-clock time (seconds) of a run from the costs measured on
+the reference machine (README, Benchmarks; the module constants); :func:`check_run_size`
+refuses, with the numbers and the ``--force`` flag, a run over :class:`SizeLimits`
+(:class:`~markerplace.errors.UserError`, one line, exit code 2).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import UserError
+from .validation import OCCUPANCY_CELL
+
+log = logging.getLogger(__name__)
+
+
+SECONDS_PER_POSE_CORE = 0.035
+"""Render + SIFT of one 600x450 pose on one core (README, Benchmarks: office, llvmpipe)."""
+BYTES_PER_POSE = 0.8e6
+"""Peak memory per camera pose of the main process (office: 1.55 GB for 1848 poses)."""
+BASE_BYTES = 0.4e9
+"""Main process without poses (libraries, scene)."""
+BYTES_PER_WORKER = 0.35e9
+"""One rendering worker (GL context, scene copy)."""
+BYTES_PER_GRID_CELL = 40.0
+"""Occupancy grid and its distance transforms per 5 cm cell of the model's bounding box."""
+SECONDS_PER_QUERY_CORE = 0.1
+"""Localizing one test image on one core (README, Results: room and office evaluations)."""
+
+
+STOREY_HEIGHT_M = 3.5
+"""Height per storey when guessing how many storeys ``--level all`` plans."""
+LARGE_FOOTPRINT_M2 = 10_000.0
+"""A refused run over this footprint also suggests ``--unit-scale`` (a model in cm looks 10^4 x larger)."""
+
+
+@dataclass(frozen=True)
+class SizeLimits:
+    """Largest run started without ``--force``.
+
+    Attributes:
+        max_poses: camera poses (estimated upper bound).
+        max_hours: estimated wall-clock hours.
+        memory_fraction: estimated peak memory as a fraction of the machine's memory.
+    """
+
+    max_poses: int = 200_000
+    max_hours: float = 12.0
+    memory_fraction: float = 0.8
+
+
+@dataclass(frozen=True)
+class RunEstimate:
+    """Estimated size of a run (see :func:`estimate_run`).
+
+    Attributes:
+        footprint_m2: area where cameras may stand on one storey (bounding box less the
+            clearance), m^2.
+        poses: camera poses, an upper bound (footprint / grid_spacing^2 x yaws x storeys).
+        memory_bytes: peak memory, bytes.
+        seconds: wall-clock time on ``workers`` processes.
+        workers: rendering processes.
+        queries: localized test images (``evaluate``; 0 for ``plan``).
+    """
+
+    footprint_m2: float
+    poses: int
+    memory_bytes: float
+    seconds: float
+    workers: int
+    queries: int = 0
+    storeys: int = 1
+
+    def describe(self) -> str:
+        where = f"{self.footprint_m2:.0f} m^2 footprint" + (f" x {self.storeys} storeys" if self.storeys > 1 else "")
+        text = (f"up to about {self.poses:,} camera poses ({where}), "
+                f"{_gib(self.memory_bytes)} of memory and {_duration(self.seconds)} on {self.workers} worker(s)")
+        if self.queries:
+            text += f" including {self.queries:,} test-image localizations"
+        return text
+
+
+def _gib(b: float) -> str:
+    return f"{b / 2**30:.1f} GiB"
+
+
+def _duration(s: float) -> str:
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 5400:
+        return f"{s / 60:.0f} min"
+    return f"{s / 3600:.1f} h"
+
+
+def machine_memory_bytes() -> float:
+    """Physical memory of this machine, or the cgroup limit when lower (bytes)."""
+    try:
+        total = float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        total = 8 * 2**30
+    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(limit_file).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and 0 < int(text) < total:
+            total = float(int(text))
+    return total
+
+
+def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0) -> RunEstimate:
+    """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
+
+    Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
+    by ``grid_spacing^2``, times the yaws, times the storeys planned (``--level N``: one;
+    ``--level all``: one per started 3.5 m of height above the first 0.5 m). An upper bound:
+    walls and furniture take space.
+    Memory and time use the per-pose costs measured on the reference machine (module
+    constants). ``evaluate`` adds a map re-render per placement with markers and one
+    localization per test image, test set and placement.
+    """
+    from .runtime.workers import default_workers
+
+    d = plan_config.discretize
+    lo, hi = scene.bounds
+    w = max(float(hi[0] - lo[0]) - 2 * d.clearance, 0.0)
+    h = max(float(hi[1] - lo[1]) - 2 * d.clearance, 0.0)
+    footprint = w * h
+    locations = (math.floor(w / d.grid_spacing) + 1) * (math.floor(h / d.grid_spacing) + 1) if footprint > 0 else 1
+    storeys = 1 if d.level is not None else max(1, math.ceil((float(hi[2] - lo[2]) - 0.5) / STOREY_HEIGHT_M))
+    poses = int(locations * d.num_yaws * storeys)
+    workers = default_workers(plan_config.observe.workers)
+    cells = (float(hi[0] - lo[0]) / OCCUPANCY_CELL + 20) * (float(hi[1] - lo[1]) / OCCUPANCY_CELL + 20)
+    memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
+    core_seconds = poses * SECONDS_PER_POSE_CORE
+    queries = 0
+    if evaluate_config is not None:
+        ks, methods = len(evaluate_config.ks), set(evaluate_config.methods)
+        with_markers = (ks if "omp" in methods else 0) + evaluate_config.runs * ks * len(methods & {"random", "uniform"}) \
+            + extra_placements
+        placements = with_markers + (1 if "none" in methods else 0)
+        queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
+        core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
+            + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE
+    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys)
+
+
+def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
+                   memory_bytes: float | None = None) -> None:
+    """Refuse a run over ``limits`` (unless ``force``), naming the numbers and the flag.
+
+    Raises:
+        UserError: estimated poses over ``max_poses``, time over ``max_hours`` or memory over
+            ``memory_fraction`` of ``memory_bytes`` (default: :func:`machine_memory_bytes`).
+    """
+    total = machine_memory_bytes() if memory_bytes is None else memory_bytes
+    reasons = []
+    if estimate.poses > limits.max_poses:
+        reasons.append(f"more than {limits.max_poses:,} poses")
+    if estimate.memory_bytes > limits.memory_fraction * total:
+        reasons.append(f"more memory than this machine has ({_gib(total)})")
+    if estimate.seconds > limits.max_hours * 3600:
+        reasons.append(f"longer than {limits.max_hours:g} h")
+    if not reasons:
+        log.info("run size: %s", estimate.describe())
+        return
+    if force:
+        log.warning("run size: %s (%s); going on because of --force", estimate.describe(), " and ".join(reasons))
+        return
+    units = ("; if the model is not in metres, pass --unit-scale (e.g. 0.01 for cm)"
+             if estimate.footprint_m2 > LARGE_FOOTPRINT_M2 else "")
+    raise UserError(f"this run needs {estimate.describe()}: {' and '.join(reasons)}; increase --grid-spacing or "
+                    f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway{units}")
