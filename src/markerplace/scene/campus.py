@@ -46,15 +46,15 @@ from dataclasses import replace
 
 from . import textures as tx
 from .furniture import palette, texture_fns
-from .house import Building
-from .layout import Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
 from .meshkit import Material, MeshBuilder, add_box
-from .procedural import add_layout, door_span, layout_rooms, wall_material
+from .procedural import add_layout, layout_rooms, wall_material
 from .types import Scene
+from .walls import door_span
 
 log = logging.getLogger(__name__)
 
-__all__ = ["campus_plan", "build_campus", "STOREY_HEIGHT", "CEILING_HEIGHT", "SLAB", "FOOTPRINT", "HOLE"]
+__all__ = ["campus_plan", "build_campus", "twin_pairs", "STOREY_HEIGHT", "CEILING_HEIGHT", "SLAB", "FOOTPRINT", "HOLE"]
 
 FOOTPRINT = (0.0, 0.0, 48.0, 21.5)
 STOREY_HEIGHT = 3.0

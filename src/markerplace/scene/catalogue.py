@@ -12,9 +12,9 @@ from __future__ import annotations
 import functools
 
 from ..errors import UserError
-from .layout import Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
 from .campus import build_campus, campus_plan
-from .house import Building, build_house, house_plan
+from .house import build_house, house_plan
 from .procedural import build_scene
 from .types import Scene
 
@@ -360,7 +360,7 @@ def builtin_names() -> list[str]:
 
 @functools.lru_cache(maxsize=None)
 def get_layout(name: str) -> Layout | Building:
-    """The :class:`Layout` of a built-in scene, or the :class:`~.house.Building` (one layout per
+    """The :class:`Layout` of a built-in scene, or the :class:`~.layout.Building` (one layout per
     storey) of a multi-storey one; both have ``rooms``, ``floor_area`` and ``description``.
     Raises UserError for an unknown name."""
     if name not in _LAYOUTS:

@@ -51,20 +51,20 @@ Everything else (walls, floors, ceilings, lights, furniture, pictures) comes fro
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
 from . import textures as tx
 from .furniture import palette, texture_fns
-from .layout import Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
 from .meshkit import Material, MeshBuilder, add_box
-from .procedural import add_layout, door_span, layout_rooms, wall_material
+from .procedural import add_layout, layout_rooms, wall_material
 from .types import Scene
+from .walls import door_span
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Building", "build_house", "house_plan"]
+__all__ = ["build_house", "house_plan"]
 
 STOREY_HEIGHT = 3.0
 CEILING_HEIGHT = 2.7
@@ -82,28 +82,6 @@ GLASS_WIDTH = 3.7
 GLASS_PANES = 4
 FRAME = 0.05  # glazing frame members: width (and rail height)
 NARROW = 0.7
-
-
-@dataclass(frozen=True)
-class Building:
-    """A multi-storey built-in: one :class:`Layout` per storey (ascending ``floor_z``).
-
-    ``rooms`` and ``floor_area`` cover all storeys, so the catalogue lists it like a layout.
-    """
-
-    name: str
-    description: str
-    storeys: tuple[Layout, ...]
-    slab_thickness: float
-
-    @property
-    def rooms(self) -> tuple[RoomSpec, ...]:
-        return tuple(r for s in self.storeys for r in s.rooms)
-
-    @property
-    def floor_area(self) -> float:
-        """Sum of the room footprints of all storeys, m^2 (on wall centre lines)."""
-        return float(sum(s.floor_area for s in self.storeys))
 
 
 def _ground() -> Layout:

@@ -3,6 +3,7 @@
 World frame: z up, metres. Room bounds are wall centre lines; furniture and pictures are in
 room-local coordinates (metres from the room's (xmin, ymin) corner). A :class:`Layout` is one
 interior or one storey of a building (its ``floor_z``); :mod:`.procedural` turns it into meshes.
+A :class:`Building` is a multi-storey built-in: one layout per storey (:mod:`.house`, :mod:`.campus`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from .furniture import FURNITURE
 
-__all__ = ["Door", "Item", "Layout", "Picture", "RoomSpec", "chairs_around", "wall_item", "workstation"]
+__all__ = ["Building", "Door", "Item", "Layout", "Picture", "RoomSpec", "chairs_around", "wall_item", "workstation"]
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,28 @@ class Layout:
     def floor_area(self) -> float:
         """Sum of room footprints in m^2 (on wall centre lines)."""
         return float(sum((r.bounds[2] - r.bounds[0]) * (r.bounds[3] - r.bounds[1]) for r in self.rooms))
+
+
+@dataclass(frozen=True)
+class Building:
+    """A multi-storey built-in: one :class:`Layout` per storey (ascending ``floor_z``).
+
+    ``rooms`` and ``floor_area`` cover all storeys, so the catalogue lists it like a layout.
+    """
+
+    name: str
+    description: str
+    storeys: tuple[Layout, ...]
+    slab_thickness: float
+
+    @property
+    def rooms(self) -> tuple[RoomSpec, ...]:
+        return tuple(r for s in self.storeys for r in s.rooms)
+
+    @property
+    def floor_area(self) -> float:
+        """Sum of the room footprints of all storeys, m^2 (on wall centre lines)."""
+        return float(sum(s.floor_area for s in self.storeys))
 
 
 # ----------------------------------------------------------------------------------------------

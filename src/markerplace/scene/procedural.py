@@ -1,17 +1,19 @@
 """Procedural interiors: build a textured :class:`Scene` from a :class:`Layout` description.
 
 World frame: z up, metres, the floor at the layout's ``floor_z`` (0 for the single-storey
-built-ins; one layout per storey for a building, see :mod:`.house`). A layout is a set of axis-aligned room rectangles whose
-edges are wall centre lines, doors between pairs of rooms, and per-room furniture and pictures in
-room-local coordinates (metres from the room's (xmin, ymin) corner), so two rooms with the same
-contents are identical up to a translation.
+built-ins; one layout per storey for a building, see :mod:`.house`). A layout is a set of
+axis-aligned room rectangles whose edges are wall centre lines, doors between pairs of rooms,
+and per-room furniture and pictures in room-local coordinates (metres from the room's
+(xmin, ymin) corner), so two rooms with the same contents are identical up to a translation.
 
 Geometry is made of boxes and quads only (:mod:`.meshkit`). Parts are grouped by material
 (texture + colour), so a whole scene is a few dozen :class:`MeshPart` and repeated items share one
-texture array. Furniture builders, their local frame and the palette live in :mod:`.furniture`;
-the layout dataclasses in :mod:`.layout`. Rooms may sit lower than their storey (``floor_dz``, a
-sunken room: walls reach down to it and openings towards it get a step) and have holes in their
-floor or ceiling (a stairwell).
+texture array. Walls, door openings and steps are built by :mod:`.walls`; furniture builders,
+their local frame and the palette live in :mod:`.furniture`; the layout dataclasses in
+:mod:`.layout`. Here: floors, ceilings, lights, furniture and pictures of each room, layout
+validation and assembly. Rooms may sit lower than their storey (``floor_dz``, a sunken room:
+walls reach down to it and openings towards it get a step) and have holes in their floor or
+ceiling (a stairwell).
 """
 
 from __future__ import annotations
@@ -23,179 +25,14 @@ import numpy as np
 
 from . import textures as tx
 from .furniture import FLOORS, FURNITURE, MAX_FREE_HEIGHT, TALL_AGAINST_WALL, palette, texture_fns
-from .layout import Door, Item, Layout, Picture, RoomSpec
-from .meshkit import AXES, Material, MeshBuilder, add_box
+from .layout import Layout, RoomSpec
+from .meshkit import Material, MeshBuilder, add_box
 from .types import Room, Scene
+from .walls import build_walls, door_gaps, round_line
 
-__all__ = [
-    "FURNITURE", "Door", "Item", "Layout", "Material", "MeshBuilder", "Picture", "RoomSpec",
-    "add_box", "add_layout", "build_scene", "door_span", "layout_rooms", "subtract_rects", "validate_layout",
-    "wall_material",
-]
+__all__ = ["add_layout", "build_scene", "layout_rooms", "subtract_rects", "validate_layout", "wall_material"]
 
 log = logging.getLogger(__name__)
-
-
-# ----------------------------------------------------------------------------------------------
-# walls
-
-
-def _r(v: float) -> float:
-    return round(float(v), 4)
-
-
-def _wall_lines(rooms: tuple[RoomSpec, ...]):
-    """Merged wall intervals per line: {("h", y): [(x0, x1), ...], ("v", x): [(y0, y1), ...]}."""
-    lines: dict[tuple[str, float], list[tuple[float, float]]] = {}
-    for r in rooms:
-        x0, y0, x1, y1 = (_r(v) for v in r.bounds)
-        lines.setdefault(("h", y0), []).append((x0, x1))
-        lines.setdefault(("h", y1), []).append((x0, x1))
-        lines.setdefault(("v", x0), []).append((y0, y1))
-        lines.setdefault(("v", x1), []).append((y0, y1))
-    merged = {}
-    for key, ivs in lines.items():
-        ivs = sorted(ivs)
-        out = [list(ivs[0])]
-        for a, b in ivs[1:]:
-            if a <= out[-1][1] + 1e-9:
-                out[-1][1] = max(out[-1][1], b)
-            else:
-                out.append([a, b])
-        merged[key] = [tuple(iv) for iv in out]
-    return merged
-
-
-def door_span(layout: Layout, door: Door) -> tuple[str, float, float, float]:
-    """Where ``door`` opens: (orient, line, start, end).
-
-    ``orient`` is ``"h"`` for a wall along x at y = ``line`` or ``"v"`` for a wall along y at
-    x = ``line`` (world metres, ``line`` rounded to 0.1 mm); the opening spans [start, end] along
-    the wall. Raises ValueError when the rooms share no wall long enough for the opening.
-    """
-    rooms = {r.name: r for r in layout.rooms}
-    a, b = rooms[door.a].bounds, rooms[door.b].bounds
-    if abs(a[2] - b[0]) < 1e-6 or abs(b[2] - a[0]) < 1e-6:
-        x = a[2] if abs(a[2] - b[0]) < 1e-6 else a[0]
-        lo, hi = max(a[1], b[1]), min(a[3], b[3])
-        key = ("v", _r(x))
-    elif abs(a[3] - b[1]) < 1e-6 or abs(b[3] - a[1]) < 1e-6:
-        y = a[3] if abs(a[3] - b[1]) < 1e-6 else a[1]
-        lo, hi = max(a[0], b[0]), min(a[2], b[2])
-        key = ("h", _r(y))
-    else:
-        raise ValueError(f"door {door.a}-{door.b}: the rooms do not share a wall")
-    margin = door.width / 2 + layout.wall_thickness
-    if hi - lo < 2 * margin:
-        raise ValueError(f"door {door.a}-{door.b}: shared wall too short for a {door.width} m opening")
-    c = np.clip(lo + door.at * (hi - lo), lo + margin, hi - margin)
-    return key[0], key[1], float(c - door.width / 2), float(c + door.width / 2)
-
-
-def _door_gaps(layout: Layout) -> dict[tuple[str, float], list[tuple[float, float, float]]]:
-    """Door openings per wall line: (start, end, height) along the line."""
-    gaps: dict[tuple[str, float], list[tuple[float, float, float]]] = {}
-    for d in layout.doors:
-        orient, line, g0, g1 = door_span(layout, d)
-        gaps.setdefault((orient, line), []).append((g0, g1, d.height))
-    return gaps
-
-
-def _room_at(rooms: tuple[RoomSpec, ...], x: float, y: float) -> RoomSpec | None:
-    for r in rooms:
-        x0, y0, x1, y1 = r.bounds
-        if x0 < x < x1 and y0 < y < y1:
-            return r
-    return None
-
-
-def _build_walls(mb: MeshBuilder, layout: Layout, pal: dict, wall_mats: dict[str, Material]) -> None:
-    """Walls as thin slabs between junction pillars, with door openings, lintels and steps.
-
-    Slabs and pillars reach from the lowest floor of the rooms beside them up to the ceiling
-    (``floor_z + ceiling_height``); an opening between rooms whose floors differ gets a step.
-    """
-    t = layout.wall_thickness
-    zf = layout.floor_z
-    H = zf + layout.ceiling_height
-    ht = t / 2
-    nodes = {(_r(x), _r(y)) for r in layout.rooms for x in (r.bounds[0], r.bounds[2]) for y in (r.bounds[1], r.bounds[3])}
-    gaps = _door_gaps(layout)
-
-    def side_mat(px: float, py: float) -> Material:
-        room = _room_at(layout.rooms, px, py)
-        return wall_mats[room.name] if room is not None else pal["exterior"]
-
-    def floors(*points) -> list[float]:
-        # floor_dz of the rooms containing the points (the outside has none)
-        return [room.floor_dz for room in (_room_at(layout.rooms, px, py) for px, py in points) if room is not None]
-
-    def slab(orient: str, c: float, a: float, b: float, z0: float, z1: float, caps: tuple[bool, bool], bottom: float):
-        # slab along the line between a and b (a < b), across [c - ht, c + ht], height [z0, z1];
-        # ``bottom`` is the lowest floor beside it (its underside there is hidden)
-        if orient == "h":
-            lo, hi = np.array([a, c - ht, z0]), np.array([b, c + ht, z1])
-            sides = {"+y": side_mat((a + b) / 2, c + 0.2), "-y": side_mat((a + b) / 2, c - 0.2)}
-            ends = ("-x", "+x")
-        else:
-            lo, hi = np.array([c - ht, a, z0]), np.array([c + ht, b, z1])
-            sides = {"+x": side_mat(c + 0.2, (a + b) / 2), "-x": side_mat(c - 0.2, (a + b) / 2)}
-            ends = ("-y", "+y")
-        mats = dict(sides)
-        for end, cap in zip(ends, caps):
-            if cap:
-                mats[end] = pal["trim"]
-        skip = ("+z", "-z") if z0 == bottom else ("+z",)
-        if z0 > bottom:
-            mats["-z"] = pal["trim"]
-        add_box(mb, lo, hi, mats, None, skip=skip)
-
-    def step(orient: str, c: float, a: float, b: float, dz_minus: float, dz_plus: float):
-        # a step filling the opening [a, b] below the higher floor, on the lower side's half
-        low_plus = dz_plus < dz_minus
-        across = (c, c + ht) if low_plus else (c - ht, c)
-        z0, z1 = zf + min(dz_minus, dz_plus), zf + max(dz_minus, dz_plus)
-        axis = "y" if orient == "h" else "x"
-        riser = ("+" if low_plus else "-") + axis
-        if orient == "h":
-            lo, hi = np.array([a, across[0], z0]), np.array([b, across[1], z1])
-        else:
-            lo, hi = np.array([across[0], a, z0]), np.array([across[1], b, z1])
-        add_box(mb, lo, hi, {riser: pal["trim"], "+z": pal["trim"]}, None, skip=("-z",))
-
-    for (orient, c), intervals in _wall_lines(layout.rooms).items():
-        on_line = sorted({(n[0] if orient == "h" else n[1]) for n in nodes if (n[1] if orient == "h" else n[0]) == c})
-        line_gaps = sorted(gaps.get((orient, c), []))
-        for a, b in intervals:
-            cuts = [p for p in on_line if a - 1e-9 <= p <= b + 1e-9]
-            for p, q in zip(cuts[:-1], cuts[1:]):
-                # piece between two junctions, shortened to leave room for the pillars; it has one
-                # room (or the outside) on each side
-                m = (p + q) / 2
-                minus, plus = ((m, c - 0.2), (m, c + 0.2)) if orient == "h" else ((c - 0.2, m), (c + 0.2, m))
-                dzs = floors(minus, plus)
-                bottom = zf + min(dzs, default=0.0)
-                start, start_cap = p + ht, False
-                for g0, g1, gh in line_gaps:
-                    if g0 >= p and g1 <= q:
-                        if g0 < start + 1e-6:
-                            raise ValueError(f"door opening at {orient}={c} overlaps a wall junction")
-                        slab(orient, c, start, g0, bottom, H, (start_cap, True), bottom)
-                        z_head = zf + max(dzs, default=0.0) + gh
-                        if z_head < H - 1e-9:
-                            slab(orient, c, g0, g1, z_head, H, (False, False), bottom)
-                        (dz_minus,), (dz_plus,) = floors(minus), floors(plus)
-                        if dz_minus != dz_plus:
-                            step(orient, c, g0, g1, dz_minus, dz_plus)
-                        start, start_cap = g1, True
-                if q - ht > start + 1e-6:
-                    slab(orient, c, start, q - ht, bottom, H, (start_cap, False), bottom)
-    for x, y in sorted(nodes):
-        bottom = zf + min(floors(*((x + sx, y + sy) for sx in (-0.2, 0.2) for sy in (-0.2, 0.2))), default=0.0)
-        lo, hi = np.array([x - ht, y - ht, bottom]), np.array([x + ht, y + ht, H])
-        mats = {f: side_mat(x + 0.2 * n[0], y + 0.2 * n[1]) for f, (n, _) in AXES.items() if f[1] != "z"}
-        # a pillar face towards a wall slab is hidden; its room test may hit either side: fine
-        add_box(mb, lo, hi, mats, None, skip=("+z", "-z"))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -323,7 +160,7 @@ def validate_layout(layout: Layout) -> None:
     for d in layout.doors:
         if d.a not in rooms or d.b not in rooms:
             raise ValueError(f"door {d.a}-{d.b}: unknown room")
-    gaps = _door_gaps(layout)
+    gaps = door_gaps(layout)
     ht = layout.wall_thickness / 2
     for room in layout.rooms:
         x0, y0, x1, y1 = room.bounds
@@ -336,7 +173,7 @@ def validate_layout(layout: Layout) -> None:
             span = (x0, x1) if orient == "h" else (y0, y1)
             if lo < span[0] + layout.wall_thickness or hi > span[1] - layout.wall_thickness:
                 raise ValueError(f"{layout.name}/{room.name}: picture {pic.image} on wall {pic.wall} leaves the wall")
-            for g0, g1, _ in gaps.get((orient, _r(line)), []):
+            for g0, g1, _ in gaps.get((orient, round_line(line)), []):
                 if hi > g0 - 0.1 and lo < g1 + 0.1:
                     raise ValueError(f"{layout.name}/{room.name}: picture {pic.image} on wall {pic.wall} overlaps a door")
         for item in room.items:
@@ -382,7 +219,7 @@ def add_layout(mb: MeshBuilder, layout: Layout, pal: dict[str, Material], seed: 
     """
     validate_layout(layout)
     wall_mats = {room.name: wall_material(mb, room.wall_color) for room in layout.rooms}
-    _build_walls(mb, layout, pal, wall_mats)
+    build_walls(mb, layout, pal, wall_mats)
     for room in layout.rooms:
         _build_room_shell(mb, layout, room, pal)
         _build_furniture(mb, layout, room, pal, seed)
