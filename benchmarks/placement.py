@@ -33,10 +33,10 @@ from markerplace.geometry import Intrinsics, world_from_cam_poses, world_from_ma
 from markerplace.plan.localizability import (
     NoiseConfig,
     entropy,
-    marker_information_paper,
     marker_visibility,
     pose_information,
 )
+from markerplace.plan.marker_models import get_marker_model
 from markerplace.plan.placement import MarkerCoverage, omp_greedy
 
 GOAL_SPEEDUP = 1000.0
@@ -173,7 +173,7 @@ def synthetic_placement_problem(rng: np.random.Generator, grid: int, n_candidate
         ][wall]
         Tm = world_from_marker_pose(centre, normal)
         vis = marker_visibility(T, Tm, K, (intr.width, intr.height), max_range=marker_range)
-        coverages.append(MarkerCoverage(np.flatnonzero(vis), marker_information_paper(T[vis], Tm)))
+        coverages.append(MarkerCoverage(np.flatnonzero(vis), get_marker_model("paper").information(T[vis], Tm, 0.4, K)))
     return base, coverages
 
 

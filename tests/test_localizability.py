@@ -1,4 +1,5 @@
-"""Entropy, information gain, batched pose information, marker models and visibility."""
+"""Entropy, information gain, batched pose information and marker visibility (marker models:
+tests/test_marker_models.py)."""
 
 from __future__ import annotations
 
@@ -17,8 +18,6 @@ from markerplace.plan.localizability import (
     NoiseConfig,
     entropy,
     information_gain,
-    marker_information_corners,
-    marker_information_paper,
     marker_visibility,
     pose_information,
     score,
@@ -197,40 +196,6 @@ def test_visibility_rules() -> None:
     Ts = np.stack([T, T_back, T])
     vis = marker_visibility(Ts, Tm, K, SIZE, occluded=np.array([False, False, True]))
     assert vis.tolist() == [True, False, False]
-
-
-def test_corners_model_detectability() -> None:
-    T = world_from_cam_pose(np.array([0.0, 0.0, 1.5]), 0.0)
-    size = 0.4
-    near = marker_information_corners(T[None], _facing_marker(T, 2.0), size, K)[0]
-    assert np.all(np.linalg.eigvalsh(near) > 0)  # 4 known points fix all 6 dof
-    # Side in pixels ~ f * size / d: 300 * 0.4 / 13 = 9.2 px < 10 -> zero; 10 m -> 12 px.
-    assert np.all(marker_information_corners(T[None], _facing_marker(T, 13.0), size, K)[0] == 0)
-    assert np.abs(marker_information_corners(T[None], _facing_marker(T, 10.0), size, K)[0]).max() > 0
-    assert np.all(marker_information_corners(T[None], _facing_marker(T, 10.0), size, K, min_side_px=20)[0] == 0)
-    # Behind the camera, or partly outside the image.
-    T_back = world_from_cam_pose(np.array([0.0, 0.0, 1.5]), np.pi)
-    assert np.all(marker_information_corners(T_back[None], _facing_marker(T, 2.0), size, K)[0] == 0)
-    assert np.all(marker_information_corners(T[None], _facing_marker(T, 1.0, lateral=0.95), size, K)[0] == 0)
-    # Farther tags give less information; the paper model does not depend on distance.
-    far = marker_information_corners(T[None], _facing_marker(T, 5.0), size, K)[0]
-    lam = 100.0 * np.eye(6)
-    assert information_gain(lam, far) < information_gain(lam, near)
-    p2 = marker_information_paper(T[None], _facing_marker(T, 2.0))[0]
-    p5 = marker_information_paper(T[None], _facing_marker(T, 2.0))[0]
-    np.testing.assert_allclose(p2, p5)
-
-
-def test_paper_model_is_frame_consistent() -> None:
-    """Moving camera and marker together by a world transform leaves M unchanged."""
-    rng = np.random.default_rng(5)
-    T = world_from_cam_pose(np.array([1.0, 0.5, 1.5]), 0.3)
-    Tm = _facing_marker(T, 3.0, lateral=0.5)
-    G = np.eye(4)
-    G[:3, :3] = so3_exp(rng.normal(size=3))
-    G[:3, 3] = rng.normal(size=3)
-    np.testing.assert_allclose(marker_information_paper((G @ T)[None], G @ Tm),
-                               marker_information_paper(T[None], Tm), rtol=1e-9, atol=1e-3)
 
 
 def test_noise_config_validation() -> None:

@@ -9,12 +9,8 @@ gtsam = pytest.importorskip("gtsam")
 from gtsam.symbol_shorthand import L, M, X  # noqa: E402
 
 from markerplace.geometry import Intrinsics, so3_exp, world_from_cam_pose, world_from_marker_pose  # noqa: E402
-from markerplace.plan.localizability import (  # noqa: E402
-    NoiseConfig,
-    marker_information_corners,
-    marker_information_paper,
-    pose_information,
-)
+from markerplace.plan.localizability import NoiseConfig, pose_information  # noqa: E402
+from markerplace.plan.marker_models import get_marker_model  # noqa: E402
 
 NOISE = NoiseConfig()
 INTR = Intrinsics()
@@ -92,7 +88,7 @@ def test_paper_graph_matches_gtsam(seed: int) -> None:
         values.insert(M(j), mk)
         graph.add(gtsam.BetweenFactorPose3(X(0), M(j), pose.between(mk), rel))
         graph.add(gtsam.PriorFactorPose3(M(j), mk, mprior))
-        Lam = Lam + marker_information_paper(T[None], Tm, NOISE)[0]
+        Lam = Lam + get_marker_model("paper", noise=NOISE).information(T[None], Tm, 0.4, K)[0]
     cov = marginal_cov(graph, values)
     ld_gtsam = np.linalg.slogdet(cov)[1]
     ld_ours = -np.linalg.slogdet(Lam)[1]
@@ -109,7 +105,7 @@ def test_corners_model_matches_gtsam(seed: int) -> None:
     Tm = random_marker(rng, T)
     size = 0.4
     corners = (np.array([[-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]]) * size / 2) @ Tm[:3, :3].T + Tm[:3, 3]
-    Mc = marker_information_corners(T[None], Tm, size, K, NOISE)[0]
+    Mc = get_marker_model("corners", noise=NOISE).information(T[None], Tm, size, K)[0]
     assert np.abs(Mc).max() > 0, "test marker should be detectable"
     pts = random_landmarks(rng, T, 60)
     n_sim = rng.integers(0, 21, len(pts))
@@ -133,5 +129,5 @@ def test_paper_marker_model_alone_matches_gtsam() -> None:
                                        gtsam.noiseModel.Isotropic.Sigma(6, NOISE.marker_rel_sigma)))
     graph.add(gtsam.PriorFactorPose3(M(0), mk, gtsam.noiseModel.Isotropic.Sigma(6, NOISE.marker_prior_sigma)))
     cov = marginal_cov(graph, values)
-    Lam = np.eye(6) / NOISE.prior_sigma**2 + marker_information_paper(T[None], Tm, NOISE)[0]
+    Lam = np.eye(6) / NOISE.prior_sigma**2 + get_marker_model("paper", noise=NOISE).information(T[None], Tm, 0.4, K)[0]
     assert -np.linalg.slogdet(Lam)[1] == pytest.approx(np.linalg.slogdet(cov)[1], rel=1e-6)

@@ -211,3 +211,36 @@ def test_database_build_drops_invalid_points_and_load_rejects_other_files(tmp_pa
         MapDatabase.load(bad)
     with pytest.raises(UserError):
         MapDatabase.load(tmp_path / "missing.h5")
+
+
+def test_localizer_registry(world):
+    """The localizer is chosen by name; the registry's one gives what the class gives."""
+    from dataclasses import dataclass
+
+    from markerplace.errors import UserError
+    from markerplace.localization.localizer import LOCALIZERS, get_localizer
+
+    walls, _, db = world
+    assert LOCALIZERS.names() == ("sift_pnp",) and LOCALIZERS["sift_pnp"] is Localizer
+    with pytest.raises(UserError, match="--localizer 'hloc' is not known: use one of sift_pnp"):
+        get_localizer("hloc", db, K)
+    loc = get_localizer("sift_pnp", db, K, use_tags=False, num_candidates=4)
+    assert loc.config == LocalizerConfig(use_tags=False, num_candidates=4)
+    assert Localizer(db, K).config == Localizer.default_conf == LocalizerConfig()
+    pos, yaw, tilt = QUERIES[0]
+    rgb, _ = _render(walls, _tilted(pos, yaw, tilt))
+    a, b = loc.localize(rgb), Localizer(db, K, LocalizerConfig(use_tags=False, num_candidates=4)).localize(rgb)
+    assert a.candidates == b.candidates and np.array_equal(a.world_from_cam, b.world_from_cam)
+
+    @dataclass(frozen=True)
+    class Conf:
+        pass
+
+    class Second(Localizer):
+        name, summary, Config, default_conf = "second", "a second one", Conf, Conf()
+
+    try:
+        LOCALIZERS.register(Second)
+        assert LOCALIZERS.names() == ("sift_pnp", "second")
+    finally:
+        del LOCALIZERS["second"]

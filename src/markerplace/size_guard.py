@@ -143,10 +143,10 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     core_seconds = poses * SECONDS_PER_POSE_CORE
     queries = 0
     if evaluate_config is not None:
-        ks, methods = len(evaluate_config.ks), set(evaluate_config.methods)
-        with_markers = (ks if "omp" in methods else 0) + evaluate_config.runs * ks * len(methods & {"random", "uniform"}) \
-            + extra_placements
-        placements = with_markers + (1 if "none" in methods else 0)
+        from .testbed.evaluation import NO_MARKERS, marker_set_count
+
+        with_markers = marker_set_count(evaluate_config) + extra_placements
+        placements = with_markers + (1 if NO_MARKERS in evaluate_config.methods else 0)
         queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
         core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
             + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE

@@ -14,6 +14,13 @@ Pipeline for one query RGB image:
    keypoint the match with the smallest descriptor distance.
 4. ``tag_corners``: add the detected tags' 4 corners with their known 3D corners.
 5. P3P RANSAC + LM (:func:`estimate_pose`).
+
+Localizers are chosen by name from :data:`LOCALIZERS` (:mod:`markerplace.registry`); this
+pipeline is ``sift_pnp`` (:class:`Localizer`, settings :class:`LocalizerConfig`). Adding one: a
+class in this file with ``name``, ``summary``, a frozen ``Config`` and ``default_conf``, built as
+``cls(db, K, config=None, **overrides)``, with :meth:`Localizer.localize` and
+:meth:`Localizer.localize_features` returning :class:`LocalizationResult`, decorated with
+``@LOCALIZERS.register``; :func:`get_localizer` finds it by name.
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..registry import Registry, configure
 from .database import MapDatabase
 from .features import SIFT_DEFAULT, SiftConfig, extract_sift
 from .pnp import PnPConfig, estimate_pose
@@ -32,6 +40,9 @@ from .tags import TagDetection, detect_tags, pose_from_tag
 from .vlad import nearest
 
 log = logging.getLogger(__name__)
+
+#: Every localizer by name, in registration order.
+LOCALIZERS = Registry("localizer", "--localizer")
 
 
 @dataclass(frozen=True)
@@ -86,13 +97,27 @@ class LocalizationResult:
         return self.world_from_cam is not None
 
 
+@LOCALIZERS.register
 class Localizer:
-    """Localizes query images of intrinsics ``K`` (3, 3) against ``db``."""
+    """Localizes query images of intrinsics ``K`` (3, 3) against ``db`` (the pipeline of the
+    module docstring).
 
-    def __init__(self, db: MapDatabase, K: np.ndarray, config: LocalizerConfig = LocalizerConfig()):
+    Args:
+        db: the map (images with SIFT features, 3D points, VLAD vectors, tags seen).
+        K: (3, 3) pinhole matrix of the queries, pixels.
+        config: settings; None = :attr:`default_conf`.
+        **overrides: fields of :class:`LocalizerConfig` replaced in ``config``.
+    """
+
+    name = "sift_pnp"
+    summary = "tags and VLAD retrieval, SIFT matching, P3P RANSAC + LM, as in the paper"
+    Config = LocalizerConfig
+    default_conf = LocalizerConfig()
+
+    def __init__(self, db: MapDatabase, K: np.ndarray, config: LocalizerConfig | None = None, **overrides):
         self.db = db
         self.K = np.asarray(K, dtype=np.float64)
-        self.config = config
+        self.config = configure(self.default_conf if config is None else config, overrides)
         self._centres = db.poses[:, :3, 3] if len(db) else np.zeros((0, 3))
         self._axes = db.poses[:, :3, 2] if len(db) else np.zeros((0, 3))
 
@@ -222,3 +247,13 @@ class Localizer:
             num_matches=int(len(pts)),
             timing=timing,
         )
+
+
+def get_localizer(name: str, db: MapDatabase, K: np.ndarray, **conf):
+    """The localizer registered as ``name`` for ``db`` and queries of matrix ``K`` (3, 3), with
+    ``conf`` overrides of its ``default_conf``.
+
+    Raises:
+        UserError: unknown name (one line listing the known ones).
+    """
+    return LOCALIZERS.lookup(name)(db, K, **conf)

@@ -1,7 +1,8 @@
-"""Camera localizability: information matrices, entropy, marker models, marker visibility.
+"""Camera localizability: information matrices, entropy, information gain, marker visibility.
 
 This module implements the closed form of docs/design.md section 4 (the paper's factor graphs
-marginalized analytically), batched over all camera poses.
+marginalized analytically), batched over all camera poses. What one marker adds is a marker
+model's business (:mod:`markerplace.plan.marker_models`, chosen by name).
 
 Conventions
 -----------
@@ -25,7 +26,8 @@ Because ``Sigma_p`` is isotropic, ``P Sigma_p P^T = s D D^T`` with ``D = dpi/dp_
 classic interaction matrix. Each landmark's term is whitened (``A = L^-1 J`` with ``S = L L^T``).
 The per-pose sums ``sum A^T A`` over natural landmarks run in a compiled kernel
 (:mod:`markerplace.plan.landmark_kernel`, one pass per pose, poses spread over threads); the few
-marker terms use the same whitening in numpy (:func:`_whitened_jacobians`).
+marker terms (the ``corners`` marker model) use the same whitening in numpy
+(:func:`_whitened_jacobians`).
 """
 
 from __future__ import annotations
@@ -34,9 +36,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-
-from ..geometry import invert, marker_corners_local
-from .landmark_kernel import landmark_information_sums
 
 log = logging.getLogger(__name__)
 
@@ -196,6 +195,9 @@ def pose_information(world_from_cam: np.ndarray, K: np.ndarray, points_world: np
         raise ValueError("n_similar must have one entry per point")
     Lam = np.zeros((N, 6, 6))
     if P and N:
+        # imported here: numba is slow to import and only this function needs it
+        from .landmark_kernel import landmark_information_sums
+
         if np.any(idx[1:] < idx[:-1]):
             order = np.argsort(idx, kind="stable")
             idx, pts = idx[order], pts[order]
@@ -279,100 +281,6 @@ def information_gain(Lambda: np.ndarray, M: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# Marker models
-# --------------------------------------------------------------------------------------------
-
-
-def marker_information_paper(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
-                             noise: NoiseConfig = NoiseConfig()) -> np.ndarray:
-    """Camera information from one marker, the paper's model (docs/design.md section 4, 'paper').
-
-    Graph: ``BetweenFactorPose3(cam, marker, cam_from_marker, sigma_rel)`` plus
-    ``PriorFactorPose3(marker, sigma_prior)``. The between error lives in the marker's tangent
-    space: ``e = xi_m - Ad(marker_from_cam) xi_c``. Marginalizing ``xi_m`` gives::
-
-        M = A^T (Sigma_rel + Sigma_prior)^-1 A,   A = Ad(marker_from_cam)
-          = (Ad(cam_from_marker) (Sigma_rel + Sigma_prior) Ad(cam_from_marker)^T)^-1
-
-    It does not depend on distance or tag size. Visibility is not checked here.
-
-    Args:
-        world_from_cam: (N, 4, 4) camera poses.
-        world_from_marker: (4, 4) marker pose.
-        noise: noise parameters (``marker_rel_sigma``, ``marker_prior_sigma``).
-
-    Returns:
-        (N, 6, 6) information matrices in the camera tangent space (omega, nu).
-    """
-    T = np.asarray(world_from_cam, dtype=float).reshape(-1, 4, 4)
-    marker_from_cam = np.matmul(invert(np.asarray(world_from_marker, dtype=float))[None], T)
-    R = marker_from_cam[:, :3, :3]
-    t = marker_from_cam[:, :3, 3]
-    # Batched adjoint in (omega, nu) order: [[R, 0], [[t]x R, R]].
-    A = np.zeros((T.shape[0], 6, 6))
-    A[:, :3, :3] = R
-    A[:, 3:, 3:] = R
-    tx = np.zeros((T.shape[0], 3, 3))
-    tx[:, 0, 1], tx[:, 0, 2] = -t[:, 2], t[:, 1]
-    tx[:, 1, 0], tx[:, 1, 2] = t[:, 2], -t[:, 0]
-    tx[:, 2, 0], tx[:, 2, 1] = -t[:, 1], t[:, 0]
-    A[:, 3:, :3] = np.matmul(tx, R)
-    w = 1.0 / (noise.marker_rel_sigma**2 + noise.marker_prior_sigma**2)
-    return w * np.matmul(np.swapaxes(A, 1, 2), A)
-
-
-#: Default smallest projected tag edge, pixels, for the 'corners' model to count a detection.
-#: AprilTag tag36h11 has 8x8 cells (6x6 data + border) inside the black square edge; below about
-#: 10 px per edge (~1.25 px per cell) detection becomes unreliable.
-MIN_SIDE_PX = 10.0
-
-
-def marker_information_corners(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
-                               size: float, K: np.ndarray, noise: NoiseConfig = NoiseConfig(),
-                               image_size: tuple[int, int] | None = None,
-                               min_side_px: float = MIN_SIDE_PX) -> np.ndarray:
-    """Camera information from one marker, 'corners' model (docs/design.md section 4).
-
-    The 4 corners of the black square are exactly known 3D points (no landmark noise),
-    measured with pixel noise ``noise.pixel_sigma``: ``M = sum_corners J^T J / sigma_px^2``.
-    A pose gets ``M = 0`` when any corner is behind the camera (z <= 1e-6 m) or outside the
-    image, or when the shortest projected edge of the tag is below ``min_side_px`` pixels
-    (too small to detect).
-
-    Args:
-        world_from_cam: (N, 4, 4) camera poses.
-        world_from_marker: (4, 4) marker pose (z out of the wall).
-        size: black-square edge, metres.
-        K: (3, 3) camera matrix.
-        noise: noise parameters (``pixel_sigma``).
-        image_size: (width, height) pixels; default ``(2 cx, 2 cy)`` from K. A corner is inside
-            when ``0 <= u <= width`` and ``0 <= v <= height``.
-        min_side_px: detection threshold on the shortest projected edge, pixels.
-
-    Returns:
-        (N, 6, 6) information matrices in the camera tangent space (omega, nu).
-    """
-    T = np.asarray(world_from_cam, dtype=float).reshape(-1, 4, 4)
-    N = T.shape[0]
-    if image_size is None:
-        image_size = (2.0 * K[0, 2], 2.0 * K[1, 2])
-    W, H = float(image_size[0]), float(image_size[1])
-    corners_w = marker_corners_local(size) @ np.asarray(world_from_marker)[:3, :3].T \
-        + np.asarray(world_from_marker)[:3, 3]
-    p_c = np.matmul(corners_w[None] - T[:, None, :3, 3], T[:, :3, :3])  # (N, 4, 3)
-    z = p_c[..., 2]
-    front = z > 1e-6
-    zs = np.where(front, z, 1.0)
-    uv = p_c[..., :2] / zs[..., None] * np.array([K[0, 0], K[1, 1]]) + np.array([K[0, 2], K[1, 2]])
-    inside = (uv[..., 0] >= 0) & (uv[..., 0] <= W) & (uv[..., 1] >= 0) & (uv[..., 1] <= H)
-    edges = np.linalg.norm(uv - np.roll(uv, -1, axis=1), axis=-1)  # (N, 4)
-    ok = np.all(front & inside, axis=1) & (edges.min(axis=1) >= min_side_px)
-    valid = np.broadcast_to(ok[:, None], (N, 4))
-    G = _whitened_jacobians(p_c[..., 0], p_c[..., 1], z, 0.0, valid, K, noise.pixel_sigma)
-    return _gram(G)
-
-
-# --------------------------------------------------------------------------------------------
 # Visibility
 # --------------------------------------------------------------------------------------------
 
@@ -432,7 +340,6 @@ def marker_visibility(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
 
 
 __all__ = [
-    "ENTROPY_CONST", "MIN_SIDE_PX", "NoiseConfig", "entropy", "information_gain", "logdet_spd",
-    "marker_information_corners", "marker_information_paper", "marker_visibility",
+    "ENTROPY_CONST", "NoiseConfig", "entropy", "information_gain", "logdet_spd", "marker_visibility",
     "pose_information", "score", "information_gain_whitened", "whitening",
 ]

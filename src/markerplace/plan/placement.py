@@ -1,4 +1,5 @@
-"""Marker placement: OMP greedy (plain and lazy), random and uniform baselines.
+"""Marker placement: OMP greedy (plain and lazy), random and uniform baselines (the algorithms;
+:mod:`markerplace.plan.methods` makes them placement methods chosen by name).
 
 The problem is given as information matrices: ``base_info`` (N, 6, 6), the information of every
 feasible camera pose without markers (see :mod:`markerplace.plan.localizability`), and per candidate
@@ -109,6 +110,15 @@ class PlacementResult:
     q: float
     evaluations: int
     info_after: np.ndarray = field(repr=False)
+
+
+def apply_coverages(info: np.ndarray, coverages: Sequence[MarkerCoverage]) -> np.ndarray:
+    """(N, 6, 6) copy of ``info`` with each coverage's information added at the poses that see
+    its marker (``coverages`` in order; the sum is the same in any order up to rounding)."""
+    out = np.array(info, dtype=float, copy=True)
+    for cov in coverages:
+        np.add.at(out, cov.pose_idx, cov.info)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -382,6 +392,6 @@ def uniform_placement(arclength: np.ndarray, perimeter_length: float, k: int,
 
 
 __all__ = [
-    "MarkerCoverage", "PlacementResult", "coverage_percentages", "inverted_cdf_rank",
+    "MarkerCoverage", "PlacementResult", "apply_coverages", "coverage_percentages", "inverted_cdf_rank",
     "omp_greedy", "percentile_with_zeros", "q_from_v", "random_placement", "uniform_placement",
 ]

@@ -24,20 +24,17 @@ from .localizability import (
     NoiseConfig,
     entropy,
     information_gain,
-    marker_information_corners,
-    marker_information_paper,
     marker_visibility,
     pose_information,
 )
 from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
 from .observe import ObserveConfig, Observations, SceneSpec, observe
-from .placement import MarkerCoverage, omp_greedy, random_placement, uniform_placement
+from .marker_models import MARKER_MODELS, get_marker_model
+from .methods import PLACEMENT_METHODS, method_from_config
+from .placement import MarkerCoverage, apply_coverages
 from .similarity import SimilarityConfig, count_similar
 
 log = logging.getLogger(__name__)
-
-METHODS = ("omp", "random", "uniform")
-MARKER_MODELS = ("paper", "corners")
 
 
 @dataclass(frozen=True)
@@ -46,15 +43,19 @@ class PlacementConfig:
 
     Attributes:
         k: number of markers to place.
-        method: ``omp`` (the paper's greedy), ``random`` (seeded uniform sample of candidates)
-            or ``uniform`` (evenly spaced along the free-space perimeter).
+        method: a name in :data:`~markerplace.plan.methods.PLACEMENT_METHODS`: ``omp`` (the
+            paper's greedy), ``random`` (seeded uniform sample of candidates) or ``uniform``
+            (evenly spaced along the free-space perimeter).
         v: OMP hyper-parameter in [0, 100]: the most visible v percent of candidates compete.
-        marker_model: ``paper`` (relative-pose factor, as published) or ``corners`` (projected
-            tag corners; depends on distance, viewing angle and tag size).
-        tag_size: black-square edge of the printed tags, metres.
+        marker_model: a name in :data:`~markerplace.plan.marker_models.MARKER_MODELS`:
+            ``paper`` (relative-pose factor, as published) or ``corners`` (projected tag
+            corners; depends on distance, viewing angle and tag size).
+        tag_size: black-square edge of the printed tags, metres: the one home of the tag size
+            (:class:`PlanConfig` derives ``discretize.tag_size``, the tag that must fit flat on
+            a wall, from it; the scoring and the placed markers use it too).
         similarity: down-weight look-alike points (the paper's similarity analysis).
         lazy: lazy greedy (exactly the same picks as plain greedy, far fewer evaluations).
-        seed: seed for the random and uniform baselines.
+        seed: seed of the randomized methods (random and uniform).
         first_tag_id: tag id of the first placed marker; ids count up in placement order,
             skipping ids of existing markers.
     """
@@ -79,6 +80,12 @@ class PlanConfig:
     similarity: SimilarityConfig = field(default_factory=SimilarityConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
+
+    def __post_init__(self) -> None:
+        """Derive ``discretize.tag_size`` from ``placement.tag_size`` (the one home of the tag
+        size): whatever ``discretize.tag_size`` was given is replaced."""
+        if self.discretize.tag_size != self.placement.tag_size:
+            object.__setattr__(self, "discretize", replace(self.discretize, tag_size=self.placement.tag_size))
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,20 +113,11 @@ class PlanData:
 def validate(config: PlanConfig) -> None:
     """Raise :class:`UserError` for settings that cannot work."""
     p = config.placement
-    if p.method not in METHODS:
-        raise UserError(f"--method {p.method!r} is not known: use one of {', '.join(METHODS)}")
-    if p.marker_model not in MARKER_MODELS:
-        raise UserError(f"--marker-model {p.marker_model!r} is not known: use one of {', '.join(MARKER_MODELS)}")
+    PLACEMENT_METHODS.lookup(p.method)  # UserError naming the known ones
+    MARKER_MODELS.lookup(p.marker_model)
     from ..validation import check_plan_config
 
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
-
-
-def _marker_info(model: str, world_from_cam: np.ndarray, world_from_marker: np.ndarray, size: float,
-                 config: PlanConfig) -> np.ndarray:
-    if model == "paper":
-        return marker_information_paper(world_from_cam, world_from_marker, config.noise)
-    return marker_information_corners(world_from_cam, world_from_marker, size, config.observe.intrinsics.K, config.noise)
 
 
 def geometric_visibility(world_from_cam: np.ndarray, world_from_markers: np.ndarray, config: PlanConfig) -> np.ndarray:
@@ -133,11 +131,14 @@ def geometric_visibility(world_from_cam: np.ndarray, world_from_markers: np.ndar
 
 def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, sizes: Sequence[float],
                     visible: np.ndarray, config: PlanConfig) -> list:
-    """One :class:`MarkerCoverage` per marker pose from the (N, C) visibility mask."""
+    """One :class:`MarkerCoverage` per marker pose from the (N, C) visibility mask, with the
+    information of ``config.placement.marker_model`` (:mod:`markerplace.plan.marker_models`)."""
+    model = get_marker_model(config.placement.marker_model, noise=config.noise)
+    K = config.observe.intrinsics.K
     covs = []
     for c, T in enumerate(world_from_markers):
         idx = np.flatnonzero(visible[:, c])
-        info = _marker_info(config.placement.marker_model, world_from_cam[idx], T, sizes[c], config) if len(idx) else np.zeros((0, 6, 6))
+        info = model.information(world_from_cam[idx], T, sizes[c], K) if len(idx) else np.zeros((0, 6, 6))
         covs.append(MarkerCoverage(pose_idx=idx.astype(np.int64), info=info))
     return covs
 
@@ -253,39 +254,17 @@ class Placement:
     q: float
 
 
-def apply_coverages(info: np.ndarray, coverages: Sequence) -> np.ndarray:
-    """(N, 6, 6) information with the markers of ``coverages`` added at the poses that see them."""
-    out = info.copy()
-    for cov in coverages:
-        np.add.at(out, cov.pose_idx, cov.info)
-    return out
-
-
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
-    """Choose ``config.k`` markers among the candidates with the configured method.
+    """Choose ``config.k`` markers among the candidates with the method ``config.method``
+    (:func:`~markerplace.plan.methods.method_from_config`), seeded with ``config.seed``.
 
     With ``progress``, each OMP pick is logged (candidate, gain) as it is made.
     """
     C = data.num_candidates
     if config.k > C:
         raise UserError(f"{config.k} markers requested but only {C} candidate marker poses were found: ask for fewer markers or reduce --marker-spacing")
-    existing_covs = data.coverages[C:]
-    candidate_covs = data.coverages[:C]
-    if config.method == "omp":
-        def report(i: int, k: int, candidate: int, gain: float) -> None:
-            log.info("omp pick %d/%d: candidate %d, gain %.3f", i + 1, k, candidate, gain)
-
-        res = omp_greedy(data.base_info, candidate_covs, config.k, v=config.v, lazy=config.lazy,
-                         existing=existing_covs, progress=report if progress else None)
-        order, gains, q = np.asarray(res.order), np.asarray(res.gains, dtype=float), float(res.q)
-        info_after = res.info_after
-    else:
-        if config.method == "random":
-            order = np.asarray(random_placement(C, config.k, config.seed))
-        else:
-            order = np.asarray(uniform_placement(data.disc.perimeter_arclength, data.disc.perimeter_length, config.k, seed=config.seed))
-        gains, q = np.full(len(order), np.nan), float("nan")
-        info_after = apply_coverages(data.base_info, list(existing_covs) + [candidate_covs[i] for i in order])
+    choice = method_from_config(config).place(data, config.k, seed=config.seed, progress=progress)
+    order = np.asarray(choice.order, dtype=np.int64)
     used = {m.tag_id for m in existing}
     markers, tag_id = [], config.first_tag_id
     for c in order:
@@ -293,7 +272,7 @@ def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = 
             tag_id += 1
         markers.append(Marker(tag_id, config.tag_size, data.disc.candidate_world_from_marker[c].copy(), FAMILY))
         used.add(tag_id)
-    return Placement(order.astype(np.int64), gains, markers, info_after, q)
+    return Placement(order, np.asarray(choice.gains, dtype=float), markers, choice.info_after, float(choice.q))
 
 
 def first_pick_gain(data: PlanData, placement: Placement) -> np.ndarray:

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..testbed.evaluation import BASELINE_METHODS
+from ..testbed.evaluation import NO_MARKERS, baseline_methods
 from .tables import display_name
 
 
@@ -70,7 +70,8 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
     Args:
         hits: (method, run, k) -> (n,) bool, the test images localized within the threshold;
             all arrays index the same test images. Candidates are the methods other than
-            ``none`` and the baselines (:data:`~markerplace.testbed.evaluation.BASELINE_METHODS`).
+            ``none`` and the baselines (the randomized placement methods,
+            :func:`~markerplace.testbed.evaluation.baseline_methods`).
         ks: marker budgets to compare.
         n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 
@@ -78,10 +79,11 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
         One dict per (method, baseline, k) present: ``method, baseline, k, diff, low, high``
         (differences in recall fractions) and ``runs`` (baseline runs averaged).
     """
-    methods = list(dict.fromkeys(m for (m, _, _) in hits if m not in BASELINE_METHODS and m != "none"))
+    baselines = baseline_methods()
+    methods = list(dict.fromkeys(m for (m, _, _) in hits if m not in baselines and m != NO_MARKERS))
     out = []
     for method in methods:
-        for baseline in BASELINE_METHODS:
+        for baseline in baselines:
             for k in ks:
                 own = [h for (m, _, kk), h in hits.items() if m == method and kk == k]
                 base = [h for (m, _, kk), h in sorted(hits.items(), key=lambda kv: kv[0])

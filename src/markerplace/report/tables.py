@@ -5,8 +5,10 @@ A *recall row* is a dict with the ``recall.csv`` columns :data:`CSV_COLUMNS`:
 such as ``5cm/5deg`` (see :func:`markerplace.testbed.evaluation.threshold_label`), ``recall`` is a
 fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``.
 
-Markdown tables print recall in percent. Methods with several runs (random and uniform
-baselines) show ``mean ± std`` over runs, std being the sample standard deviation (ddof = 1;
+Markdown tables print recall in percent. Methods are listed in registry order
+(:data:`~markerplace.plan.methods.PLACEMENT_METHODS`), labelled by the method's ``label``, then
+other names (``--placements`` files) sorted. Methods with several runs (the randomized ones,
+random and uniform) show ``mean ± std`` over runs, std being the sample standard deviation (ddof = 1;
 0 for a single run shows just the mean). The best mean per column is bold, as in Table I.
 """
 
@@ -20,15 +22,19 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..io_utils import atomic_path
+from ..plan.methods import PLACEMENT_METHODS
+from ..testbed.evaluation import NO_MARKERS
 
 CSV_COLUMNS = ("scene", "method", "run", "k", "test_set", "threshold", "recall", "n_tests")
-DISPLAY_NAMES = {"omp": "Ours", "random": "Rand.", "uniform": "Unif.", "none": "No markers"}
-METHOD_ORDER = ("omp", "random", "uniform")
 
 
 def display_name(method: str) -> str:
-    """Paper-style label of a method (``omp`` -> ``Ours``); unknown names are kept."""
-    return DISPLAY_NAMES.get(method, method)
+    """Paper-style label of a method: ``No markers`` for ``none``, a placement method's ``label``
+    (``omp`` -> ``Ours``); other names (``--placements`` files) are kept."""
+    if method == NO_MARKERS:
+        return "No markers"
+    cls = PLACEMENT_METHODS.get(method)
+    return cls.label if cls is not None and cls.label else method
 
 
 def write_recall_csv(path: str | Path, rows: Iterable[dict]) -> None:
@@ -72,8 +78,8 @@ def _group(rows: Iterable[dict]) -> dict:
 
 
 def _methods(rows: Sequence[dict]) -> list[str]:
-    present = {r["method"] for r in rows if r["method"] != "none"}
-    ordered = [m for m in METHOD_ORDER if m in present]
+    present = {r["method"] for r in rows if r["method"] != NO_MARKERS}
+    ordered = [m for m in PLACEMENT_METHODS if m in present]
     return ordered + sorted(present - set(ordered))
 
 

@@ -22,7 +22,7 @@ has errors ``inf`` (or NaN) and always counts as a miss; it stays in the denomin
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -31,6 +31,7 @@ import numpy as np
 from ..errors import UserError
 from ..geometry import world_from_cam_poses
 from ..io_utils import write_npz
+from ..plan.methods import PLACEMENT_METHODS
 
 TEST_SETS = ("weighted", "uniform")
 
@@ -279,9 +280,29 @@ def threshold_label(threshold: tuple[float, float]) -> str:
 
 # --- experiments -------------------------------------------------------------------------------
 
-METHODS = ("none", "omp", "random", "uniform")
-#: Randomized baselines: several seeded runs each (``--runs``).
-BASELINE_METHODS = ("random", "uniform")
+#: ``--methods`` name of the marker set without markers; every other name is a placement method
+#: of :data:`~markerplace.plan.methods.PLACEMENT_METHODS`.
+NO_MARKERS = "none"
+
+
+def method_names() -> tuple[str, ...]:
+    """Every name ``--methods`` accepts: ``none``, then the registered placement methods."""
+    return (NO_MARKERS, *PLACEMENT_METHODS)
+
+
+def baseline_methods() -> tuple[str, ...]:
+    """The randomized placement methods (``random``, ``uniform``): placed ``--runs`` times each
+    and the baselines of the paired comparisons."""
+    return tuple(name for name, cls in PLACEMENT_METHODS.items() if cls.randomized)
+
+
+def marker_set_count(config: EvaluateConfig) -> int:
+    """Marker sets with markers that :func:`build_placements` evaluates without ``--placements``
+    files: per method, one per k, times ``runs`` for randomized methods (every entry of
+    ``config.ks`` counts: an upper bound when ks repeat)."""
+    ks = len(config.ks)
+    return sum(ks * (config.runs if PLACEMENT_METHODS[m].randomized else 1)
+               for m in config.methods if m in PLACEMENT_METHODS)
 
 
 @dataclass(frozen=True)
@@ -291,8 +312,9 @@ class EvaluateConfig:
     Attributes:
         tests: test images per test set (paper: 200 room ... 10000 apartment).
         test_sets: ``weighted`` (towards low scores) and/or ``uniform``.
-        methods: ``none``, ``omp``, ``random``, ``uniform`` (the paper's comparison).
-        runs: placements per randomized baseline (random, uniform), seeds ``placement_seed + run``.
+        methods: ``none`` (no markers) and placement methods by name (default: ``none`` and
+            every registered method: ``omp``, ``random``, ``uniform``, the paper's comparison).
+        runs: placements per randomized method (random, uniform), seeds ``placement_seed + run``.
         ks: marker budgets (OMP is computed once with max k; prefixes are the smaller budgets).
         thresholds: recall thresholds (metres, degrees).
         use_tags: tag detection in the localizer (paper's "marker detection"; off = --no-tags).
@@ -310,7 +332,7 @@ class EvaluateConfig:
 
     tests: int = 200
     test_sets: tuple[str, ...] = TEST_SETS
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = field(default_factory=method_names)
     runs: int = 5
     ks: tuple[int, ...] = (5, 10, 15, 20)
     thresholds: tuple[tuple[float, float], ...] = THRESHOLDS
@@ -335,8 +357,8 @@ def validate_evaluate_config(config: EvaluateConfig) -> None:
 
     if not config.test_sets or any(t not in TEST_SETS for t in config.test_sets):
         raise UserError(f"--test-sets {','.join(config.test_sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")
-    if any(m not in METHODS for m in config.methods):
-        raise UserError(f"--methods {','.join(config.methods)!r} is not valid: use a comma list of {', '.join(METHODS)}")
+    if any(m not in method_names() for m in config.methods):
+        raise UserError(f"--methods {','.join(config.methods)!r} is not valid: use a comma list of {', '.join(method_names())}")
     check_evaluate_config(config)  # numbers: finite and in range (markerplace.validation)
 
 
@@ -345,7 +367,7 @@ class PlacementRun:
     """One evaluated marker set.
 
     Attributes:
-        method: ``none``, ``omp``, ``random``, ``uniform`` or an extra method name.
+        method: ``none``, a placement method's name or an extra (``--placements``) name.
         run: run index (0 for deterministic methods).
         k: number of markers (0 for ``none``).
         markers: the markers as drawn in the scene (after tag scale and shift).
@@ -394,8 +416,9 @@ def build_placements(data, placement_config, config: EvaluateConfig,
         extra: method name -> ordered markers (e.g. from ``--placements``); evaluated at each k
             up to their length (prefixes), or at their full length when shorter than every k.
 
-    OMP is placed once with max k and evaluated on prefixes (the greedy is nested); random and
-    uniform draw their own placement for every (run, k) with seed ``placement_seed + run``.
+    Methods come in registry order. A ``nested`` method (OMP) is placed once with max k and
+    evaluated on prefixes; a ``randomized`` one (random, uniform) draws its own placement for
+    every (run, k) with seed ``placement_seed + run``; any other is placed once per k.
     """
     from dataclasses import replace
 
@@ -408,19 +431,24 @@ def build_placements(data, placement_config, config: EvaluateConfig,
         markers = shift_markers(scale_markers(markers, config.tag_scale), config.shift, config.pose_seed)
         runs.append(PlacementRun(method, run, k, tuple(markers)))
 
-    if "none" in config.methods:
-        runs.append(PlacementRun("none", 0, 0, ()))
-    if "omp" in config.methods:
-        omp = place(data, replace(placement_config, k=max(ks), method="omp"), progress=False)
-        for k in ks:
-            add("omp", 0, k, omp.markers[:k])
-    for method in BASELINE_METHODS:
-        if method in config.methods:
+    if NO_MARKERS in config.methods:
+        runs.append(PlacementRun(NO_MARKERS, 0, 0, ()))
+    for method, cls in PLACEMENT_METHODS.items():
+        if method not in config.methods:
+            continue
+        if cls.randomized:
             for run in range(config.runs):
                 for k in ks:
                     pl = place(data, replace(placement_config, k=k, method=method, seed=placement_config.seed + run),
                                progress=False)
                     add(method, run, k, pl.markers)
+        elif cls.nested:
+            pl = place(data, replace(placement_config, k=max(ks), method=method), progress=False)
+            for k in ks:
+                add(method, 0, k, pl.markers[:k])
+        else:
+            for k in ks:
+                add(method, 0, k, place(data, replace(placement_config, k=k, method=method), progress=False).markers)
     for name, markers in (extra or {}).items():
         fits = [k for k in ks if k <= len(markers)] or [len(markers)]
         for k in fits:
@@ -443,7 +471,7 @@ def find_placement_files(folder: str | Path) -> dict[str, Path]:
         if path.name.endswith(".meta.json") or path.name in ("config.json", "timings.json") or "cache" in path.relative_to(folder).parts:
             continue
         name = path.parent.name if path.name == "placement.json" else path.stem
-        if name in METHODS:
+        if name in method_names():
             name = f"{name}-file"
         if name in found:
             raise UserError(f"--placements: two files give the method name {name!r} ({found[name]}, {path}): rename one")
