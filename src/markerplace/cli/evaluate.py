@@ -47,8 +47,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
     from dataclasses import replace
 
-    from .main import plan_config_from_args, plan_inputs_in_scene_frame
-    from ..testbed.evaluation import find_placement_files, method_names, validate_evaluate_config
+    from .options import plan_config_from_args, plan_inputs_in_scene_frame
+    from ..testbed.evaluation import find_placement_files, validate_evaluate_config
     from ..markers import load_markers
     from ..plan.observe import SceneSpec
     from ..plan.planner import validate
@@ -58,7 +58,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
     if not config.methods and not args.placements:
-        raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
+        raise UserError("--methods is empty: give a comma list such as none,omp,random,uniform (or --placements DIR)")
     plan_config = plan_config_from_args(args)
     plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.ks)))
     validate(plan_config)
@@ -80,28 +80,23 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
-    from ..plan.methods import PLACEMENT_METHODS
-    from ..testbed.evaluation import baseline_methods, method_names
-    from .main import _add_plan_args, _add_scene_args
-
-    labels = {name: cls.label or name for name, cls in PLACEMENT_METHODS.items()}
+    from .options import add_plan_args, add_scene_args
 
     p = subparsers.add_parser(
         "evaluate",
         help="simulation testbed: place markers with each method, render, localize test images, report recall",
-        description=f"Compare marker placements in simulation (the paper's experiments): no markers and the "
-                    f"placement methods ({', '.join(f'{n} = {lbl}' for n, lbl in labels.items())}); recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), (1 m, 30 deg). "
+        description="Compare marker placements in simulation (the paper's experiments): OMP vs no markers, random "
+                    "and uniform placements; recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), (1 m, 30 deg). "
                     "--seed also seeds the test poses unless --test-seed is given.",
     )
-    _add_scene_args(p)
+    add_scene_args(p)
     p.add_argument("--out", required=True, help="run directory (outputs, caches; an interrupted run resumes)")
     p.add_argument("--tests", type=int, default=200, help="test images per test set (default 200)")
     p.add_argument("--test-sets", default="weighted,uniform",
                    help="comma list of weighted (towards low scores) and uniform (default weighted,uniform)")
-    p.add_argument("--methods", default=",".join(method_names()),
-                   help=f"comma list of none (no markers) and placement methods: {PLACEMENT_METHODS.help()} (default all)")
-    p.add_argument("--runs", type=int, default=5,
-                   help=f"placements per randomized method ({'/'.join(baseline_methods())}) (default 5)")
+    p.add_argument("--methods", default="none,omp,random,uniform",
+                   help="comma list of none, omp, random, uniform (default all)")
+    p.add_argument("--runs", type=int, default=5, help="placements per random/uniform baseline (default 5)")
     p.add_argument("--k", default="5,10,15,20", help="comma list of marker budgets (default 5,10,15,20)")
     p.add_argument("--test-seed", type=int, default=None,
                    help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new test "
@@ -115,6 +110,6 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                    help="print tags this many times the planned size (sensitivity study; default 1)")
     g.add_argument("--shift", type=float, default=0.0,
                    help="move every marker along its wall by +-D metres, alternating sign (sensitivity study; default 0)")
-    _add_plan_args(p)
+    add_plan_args(p)
     p.set_defaults(func=cmd_evaluate)
     return p

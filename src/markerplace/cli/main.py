@@ -13,15 +13,9 @@ import sys
 from .. import __version__
 from ..errors import UserError
 from ..log import setup_logging
+from .options import add_plan_args, add_scene_args, plan_config_from_args, plan_inputs_in_scene_frame
 
 log = logging.getLogger("markerplace.cli.main")
-
-
-def _add_scene_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
-    p.add_argument("--up", default=None, help="up axis of an OBJ/PLY file: z (default), y, -y, x, -x, -z; glTF is always y-up")
-    p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")
 
 
 def _parse_pose(text: str):
@@ -85,61 +79,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_xy(text: str | None):
-    if text is None:
-        return None
-    from ..validation import COORDINATE, parse_floats
-
-    return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
-
-
-def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
-    """``config`` with ``--start`` moved into the scene's internal frame
-    (:mod:`markerplace.scene.worldframe`), after the run-size guard
-    (:func:`markerplace.size_guard.check_run_size`; ``force`` = ``--force``)."""
-    from dataclasses import replace
-
-    from ..size_guard import check_run_size, estimate_run
-    from ..scene.worldframe import points_to_internal, world_offset
-
-    offset = world_offset(scene)
-    if config.discretize.start is not None and offset.any():
-        start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
-        config = replace(config, discretize=replace(config.discretize, start=start))
-    check_run_size(estimate_run(scene, config, evaluate_config, extra_placements), force=force)
-    return config
-
-
-def _parse_level(text: str):
-    """``--level``: ``all`` (None) or a storey index >= 0."""
-    if str(text).strip().lower() == "all":
-        return None
-    try:
-        level = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 or 'all'") from None
-    if level < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 (0 = lowest) or 'all'")
-    return level
-
-
-def plan_config_from_args(args: argparse.Namespace):
-    """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
-    from dataclasses import replace
-
-    from ..plan.discretize import DiscretizeConfig
-    from ..plan.observe import ObserveConfig
-    from ..plan.planner import PlacementConfig, PlanConfig
-
-    disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=_parse_xy(args.start),
-                   grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
-                   marker_spacing=args.marker_spacing)  # tag_size: derived from placement's by PlanConfig
-    placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
-                                marker_model=args.marker_model, tag_size=args.tag_size,
-                                similarity=not args.no_similarity, seed=args.placement_seed)
-    return PlanConfig(discretize=disc, observe=ObserveConfig(workers=args.workers), placement=placement)
-
-
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..markers import check_markers_on_walls, load_markers
     from ..plan.observe import SceneSpec
@@ -173,35 +112,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_plan_args(p: argparse.ArgumentParser) -> None:
-    """Options shared by `plan` and `evaluate` (discretization, scoring)."""
-    from ..plan.marker_models import MARKER_MODELS
-    from ..plan.methods import PLACEMENT_METHODS
-
-    g = p.add_argument_group("discretization")
-    g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
-    g.add_argument("--level", type=_parse_level, default=None, metavar="N|all",
-                   help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget (default all)")
-    g.add_argument("--start", default=None, help="X,Y: plan only the free region holding this point (default: every region of at least 2 m^2)")
-    g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
-    g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")
-    g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")
-    g.add_argument("--marker-spacing", type=float, default=1.0, help="minimum spacing of candidate marker poses on a wall, metres (default 1.0)")
-    g = p.add_argument_group("scoring and placement")
-    g.add_argument("--tag-size", type=float, default=0.4, help="black-square edge of the printed tags, metres (default 0.4)")
-    g.add_argument("-v", type=float, default=90.0, help="OMP percentile parameter v in [0, 100] (default 90)")
-    g.add_argument("--marker-model", default="paper", choices=MARKER_MODELS.names(),
-                   help=f"marker information model: {MARKER_MODELS.help()} (default paper)")
-    g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
-    randomized = "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
-    g.add_argument("--placement-seed", type=int, default=0, help=f"seed of the {randomized} placements (default 0)")
-    g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
-    g.add_argument("--force", action="store_true",
-                   help="run even when the size guard estimates more poses, memory or time than the limits "
-                        "(200,000 poses, 80%% of this machine's memory, 12 h)")
-    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="markerplace",
@@ -223,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.set_defaults(func=cmd_scene_export)
 
     p_render = sub.add_parser("render", help="render RGB, depth and normals of a scene at one camera pose")
-    _add_scene_args(p_render)
+    add_scene_args(p_render)
     p_render.add_argument("--pose", default=None, help="camera X,Y,Z,YAW_DEG (world, metres; yaw CCW from +x); default: a pose inside the scene")
     p_render.add_argument("--markers", default=None, help="JSON file of markers to draw (e.g. a placement.json)")
     p_render.add_argument("--out", required=True, help="output prefix: writes PREFIX_rgb.png, PREFIX_depth.npy, PREFIX_normal.png")
@@ -232,16 +142,13 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p_render.set_defaults(func=cmd_render)
 
-    from ..plan.methods import PLACEMENT_METHODS
-
-    p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
-    _add_scene_args(p_plan)
+    p_plan = sub.add_parser("plan", help="place k markers (OMP greedy, or random/uniform baselines) and write the plan")
+    add_scene_args(p_plan)
     p_plan.add_argument("-k", type=int, default=20, help="number of markers to place (default 20)")
     p_plan.add_argument("--out", required=True, help="run directory (stages are cached here and reused)")
-    p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
-                        help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
+    p_plan.add_argument("--method", default="omp", choices=["omp", "random", "uniform"], help="placement method (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
-    _add_plan_args(p_plan)
+    add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
     from .evaluate import add_evaluate_parser

@@ -1,0 +1,101 @@
+"""Options and settings shared by ``plan`` and ``evaluate``: the scene arguments, the
+discretization, scoring, placement and runtime options, and the
+:class:`~markerplace.plan.planner.PlanConfig` built from them.
+
+``--start`` X,Y is given in the user's (file) frame, metres; :func:`plan_inputs_in_scene_frame`
+moves it into the scene's internal frame after the run-size guard. Lengths are metres.
+Used by :mod:`markerplace.cli.main` (``plan``) and :mod:`markerplace.cli.evaluate`.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
+           "plan_inputs_in_scene_frame"]
+
+
+def add_scene_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
+    p.add_argument("--up", default=None, help="up axis of an OBJ/PLY file: z (default), y, -y, x, -x, -z; glTF is always y-up")
+    p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")
+
+
+def parse_xy(text: str | None):
+    if text is None:
+        return None
+    from ..validation import COORDINATE, parse_floats
+
+    return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
+
+
+def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
+    """``config`` with ``--start`` moved into the scene's internal frame
+    (:mod:`markerplace.scene.worldframe`), after the run-size guard
+    (:func:`markerplace.size_guard.check_run_size`; ``force`` = ``--force``)."""
+    from dataclasses import replace
+
+    from ..size_guard import check_run_size, estimate_run
+    from ..scene.worldframe import points_to_internal, world_offset
+
+    offset = world_offset(scene)
+    if config.discretize.start is not None and offset.any():
+        start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
+        config = replace(config, discretize=replace(config.discretize, start=start))
+    check_run_size(estimate_run(scene, config, evaluate_config, extra_placements), force=force)
+    return config
+
+
+def parse_level(text: str):
+    """``--level``: ``all`` (None) or a storey index >= 0."""
+    if str(text).strip().lower() == "all":
+        return None
+    try:
+        level = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 or 'all'") from None
+    if level < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 (0 = lowest) or 'all'")
+    return level
+
+
+def plan_config_from_args(args: argparse.Namespace):
+    """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
+    from dataclasses import replace
+
+    from ..plan.discretize import DiscretizeConfig
+    from ..plan.observe import ObserveConfig
+    from ..plan.planner import PlacementConfig, PlanConfig
+
+    disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
+                   grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
+                   marker_spacing=args.marker_spacing, tag_size=args.tag_size)
+    placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
+                                marker_model=args.marker_model, tag_size=args.tag_size,
+                                similarity=not args.no_similarity, seed=args.placement_seed)
+    return PlanConfig(discretize=disc, observe=ObserveConfig(workers=args.workers), placement=placement)
+
+
+def add_plan_args(p: argparse.ArgumentParser) -> None:
+    """Options shared by `plan` and `evaluate` (discretization, scoring)."""
+    g = p.add_argument_group("discretization")
+    g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
+    g.add_argument("--level", type=parse_level, default=None, metavar="N|all",
+                   help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget (default all)")
+    g.add_argument("--start", default=None, help="X,Y: plan only the free region holding this point (default: every region of at least 2 m^2)")
+    g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
+    g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")
+    g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")
+    g.add_argument("--marker-spacing", type=float, default=1.0, help="minimum spacing of candidate marker poses on a wall, metres (default 1.0)")
+    g = p.add_argument_group("scoring and placement")
+    g.add_argument("--tag-size", type=float, default=0.4, help="black-square edge of the printed tags, metres (default 0.4)")
+    g.add_argument("-v", type=float, default=90.0, help="OMP percentile parameter v in [0, 100] (default 90)")
+    g.add_argument("--marker-model", default="paper", choices=["paper", "corners"], help="marker information model (default paper)")
+    g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
+    g.add_argument("--placement-seed", type=int, default=0, help="seed of the random/uniform baselines (default 0)")
+    g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
+    g.add_argument("--force", action="store_true",
+                   help="run even when the size guard estimates more poses, memory or time than the limits "
+                        "(200,000 poses, 80%% of this machine's memory, 12 h)")
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
