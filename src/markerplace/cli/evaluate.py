@@ -48,7 +48,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from .options import plan_config_from_args, plan_inputs_in_scene_frame
-    from ..testbed.evaluation import find_placement_files, validate_evaluate_config
+    from ..testbed.evaluation import find_placement_files, method_names, validate_evaluate_config
     from ..markers import load_markers
     from ..plan.observe import SceneSpec
     from ..plan.planner import validate
@@ -58,7 +58,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
     if not config.methods and not args.placements:
-        raise UserError("--methods is empty: give a comma list such as none,omp,random,uniform (or --placements DIR)")
+        raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
     plan_config = plan_config_from_args(args)
     plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.ks)))
     validate(plan_config)
@@ -80,23 +80,28 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
+    from ..plan.methods import PLACEMENT_METHODS
+    from ..testbed.evaluation import baseline_methods, method_names
     from .options import add_plan_args, add_scene_args
+
+    methods = ", ".join(f"{name} = {cls.label or name}" for name, cls in PLACEMENT_METHODS.items())
 
     p = subparsers.add_parser(
         "evaluate",
         help="simulation testbed: place markers with each method, render, localize test images, report recall",
-        description="Compare marker placements in simulation (the paper's experiments): OMP vs no markers, random "
-                    "and uniform placements; recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), (1 m, 30 deg). "
-                    "--seed also seeds the test poses unless --test-seed is given.",
+        description=f"Compare marker placements in simulation (the paper's experiments): no markers and the "
+                    f"placement methods ({methods}); recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), "
+                    "(1 m, 30 deg). --seed also seeds the test poses unless --test-seed is given.",
     )
     add_scene_args(p)
     p.add_argument("--out", required=True, help="run directory (outputs, caches; an interrupted run resumes)")
     p.add_argument("--tests", type=int, default=200, help="test images per test set (default 200)")
     p.add_argument("--test-sets", default="weighted,uniform",
                    help="comma list of weighted (towards low scores) and uniform (default weighted,uniform)")
-    p.add_argument("--methods", default="none,omp,random,uniform",
-                   help="comma list of none, omp, random, uniform (default all)")
-    p.add_argument("--runs", type=int, default=5, help="placements per random/uniform baseline (default 5)")
+    p.add_argument("--methods", default=",".join(method_names()),
+                   help=f"comma list of none (no markers) and placement methods: {PLACEMENT_METHODS.help()} (default all)")
+    p.add_argument("--runs", type=int, default=5,
+                   help=f"placements per randomized method ({'/'.join(baseline_methods())}) (default 5)")
     p.add_argument("--k", default="5,10,15,20", help="comma list of marker budgets (default 5,10,15,20)")
     p.add_argument("--test-seed", type=int, default=None,
                    help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new test "

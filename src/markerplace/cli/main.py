@@ -142,11 +142,14 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p_render.set_defaults(func=cmd_render)
 
-    p_plan = sub.add_parser("plan", help="place k markers (OMP greedy, or random/uniform baselines) and write the plan")
+    from ..plan.methods import PLACEMENT_METHODS
+
+    p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
     add_scene_args(p_plan)
     p_plan.add_argument("-k", type=int, default=20, help="number of markers to place (default 20)")
     p_plan.add_argument("--out", required=True, help="run directory (stages are cached here and reused)")
-    p_plan.add_argument("--method", default="omp", choices=["omp", "random", "uniform"], help="placement method (default omp)")
+    p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
+                        help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
     add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)

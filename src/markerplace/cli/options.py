@@ -70,7 +70,7 @@ def plan_config_from_args(args: argparse.Namespace):
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
-                   marker_spacing=args.marker_spacing, tag_size=args.tag_size)
+                   marker_spacing=args.marker_spacing)  # tag_size: derived from placement's by PlanConfig
     placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
                                 marker_model=args.marker_model, tag_size=args.tag_size,
                                 similarity=not args.no_similarity, seed=args.placement_seed)
@@ -79,6 +79,9 @@ def plan_config_from_args(args: argparse.Namespace):
 
 def add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
+    from ..plan.marker_models import MARKER_MODELS
+    from ..plan.methods import PLACEMENT_METHODS
+
     g = p.add_argument_group("discretization")
     g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
     g.add_argument("--level", type=parse_level, default=None, metavar="N|all",
@@ -91,9 +94,11 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scoring and placement")
     g.add_argument("--tag-size", type=float, default=0.4, help="black-square edge of the printed tags, metres (default 0.4)")
     g.add_argument("-v", type=float, default=90.0, help="OMP percentile parameter v in [0, 100] (default 90)")
-    g.add_argument("--marker-model", default="paper", choices=["paper", "corners"], help="marker information model (default paper)")
+    g.add_argument("--marker-model", default="paper", choices=MARKER_MODELS.names(),
+                   help=f"marker information model: {MARKER_MODELS.help()} (default paper)")
     g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
-    g.add_argument("--placement-seed", type=int, default=0, help="seed of the random/uniform baselines (default 0)")
+    randomized = "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
+    g.add_argument("--placement-seed", type=int, default=0, help=f"seed of the {randomized} placements (default 0)")
     g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
     g.add_argument("--force", action="store_true",
                    help="run even when the size guard estimates more poses, memory or time than the limits "
