@@ -209,7 +209,7 @@ def part_c(args) -> None:
     import resource
     import tempfile
 
-    from markerplace.plan.observe import SceneSpec
+    from markerplace.scene.spec import SceneSpec
     from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
 
     config = PlanConfig(placement=PlacementConfig(k=args.k))

@@ -131,7 +131,7 @@ def part_a(args) -> None:
 def part_b(args) -> None:
     import tempfile
 
-    from markerplace.plan.observe import SceneSpec
+    from markerplace.scene.spec import SceneSpec
     from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
     from markerplace.scene import load_scene
 

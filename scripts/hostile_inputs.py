@@ -309,11 +309,13 @@ def cases(w: Path, f: dict) -> list[Case]:
     ]
     base = f["base"]
     base_args = ["plan", "tiny", "-k", "2", "--out", str(base), *FAST]
-    for art in ("observations.h5", "discretization.npz", "similarity.npz"):
+    for art, damaged in (("observations", "observations/descriptors.npy"), ("discretization.npz", "discretization.npz"),
+                         ("similarity.npz", "similarity.npz")):
         for how in ("truncate", "garble"):
-            c.append(Case(f"{how}d {art}", base_args, "warn", f"{art} is not usable", setup=damage(base / art, how)))
+            c.append(Case(f"{how}d {damaged}", base_args, "warn", f"{art} is not usable",
+                          setup=damage(base / damaged, how)))
     c.append(Case("garbled .meta.json", base_args, "ok",
-                  setup=lambda: (base / "observations.h5.meta.json").write_text("{oops")))
+                  setup=lambda: (base / "observations.meta.json").write_text("{oops")))
     c.append(Case("two plans into one folder at once", ["plan", "tiny", "-k", "2", "--out", o("conc"), *FAST], "ok",
                   extra={"concurrent": 2}, check=placement_exists(w / "out" / "conc")))
     room = ["plan", "room", "-k", "2", "--out", o("sig"), "--yaws", "4", "--workers", "1", "--quiet"]

@@ -90,11 +90,13 @@ def tiny_run(tmp_path_factory):
     return out, json.loads((out / "placement.json").read_text())["markers"]
 
 
-@pytest.mark.parametrize("artifact", ["discretization.npz", "observations.h5", "similarity.npz"])
+@pytest.mark.parametrize("artifact, damaged", [("discretization.npz", "discretization.npz"),
+                                               ("observations", "observations/descriptors.npy"),
+                                               ("similarity.npz", "similarity.npz")])
 @pytest.mark.parametrize("damage", ["truncate", "garble"])
-def test_damaged_stage_artifact_is_recomputed(tiny_run, artifact, damage, caplog, capsys):
+def test_damaged_stage_artifact_is_recomputed(tiny_run, artifact, damaged, damage, caplog, capsys):
     out, markers = tiny_run
-    path = out / artifact
+    path = out / damaged
     data = path.read_bytes()
     if damage == "truncate":  # a full disk or an interrupted copy
         path.write_bytes(data[: len(data) // 2])
@@ -106,4 +108,4 @@ def test_damaged_stage_artifact_is_recomputed(tiny_run, artifact, damage, caplog
     assert any(artifact in r.getMessage() and "recomputing" in r.getMessage() for r in caplog.records), caplog.text
     again = json.loads((out / "placement.json").read_text())["markers"]
     assert [m["position"] for m in again] == [m["position"] for m in markers]
-    assert cache.is_fresh(path, json.loads((out / f"{artifact}.meta.json").read_text())["key"])
+    assert cache.is_fresh(out / artifact, json.loads((out / f"{artifact}.meta.json").read_text())["key"])

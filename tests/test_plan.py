@@ -20,7 +20,7 @@ def tiny_plan(tmp_path_factory):
 
 def test_plan_writes_every_output(tiny_plan):
     for name in ("placement.json", "placement.csv", "scores.npz", "scores.png", "gain_first.png",
-                 "placement.png", "config.json", "discretization.npz", "observations.h5"):
+                 "placement.png", "config.json", "discretization.npz", "observations/descriptors.npy"):
         assert (tiny_plan / name).stat().st_size > 0, name
     plan = json.loads((tiny_plan / "placement.json").read_text())
     assert plan["method"] == "omp" and len(plan["markers"]) == 2
@@ -45,9 +45,9 @@ def test_plan_writes_every_output(tiny_plan):
 
 
 def test_second_run_reuses_stages_and_baselines_work(tiny_plan):
-    obs_meta = (tiny_plan / "observations.h5.meta.json").stat().st_mtime_ns
+    obs_meta = (tiny_plan / "observations.meta.json").stat().st_mtime_ns
     assert main(["plan", "tiny", "-k", "3", "--method", "random", "--out", str(tiny_plan), *FAST]) == 0
-    assert (tiny_plan / "observations.h5.meta.json").stat().st_mtime_ns == obs_meta
+    assert (tiny_plan / "observations.meta.json").stat().st_mtime_ns == obs_meta
     plan = json.loads((tiny_plan / "placement.json").read_text())
     assert plan["method"] == "random" and len(plan["markers"]) == 3
     assert main(["plan", "tiny", "-k", "3", "--method", "uniform", "--out", str(tiny_plan), *FAST]) == 0
@@ -103,11 +103,12 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     from dataclasses import replace
 
     from markerplace.plan.discretize import DiscretizeConfig
-    from markerplace.plan.observe import ObserveConfig, SceneSpec
+    from markerplace.runtime.executor import RuntimeConfig
+    from markerplace.scene.spec import SceneSpec
     from markerplace.plan.planner import PlanConfig, prepare
 
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
-                        observe=ObserveConfig(workers=1))
+                        runtime=RuntimeConfig(workers=1))
     data = prepare(SceneSpec("tiny"), config, tmp_path, progress=False)
     C = data.num_candidates
     assert C == len(data.disc.candidate_position) >= 4

@@ -6,11 +6,15 @@ import json
 import numpy as np
 import pytest
 
-from markerplace.testbed import evaluation as ev
-from markerplace.testbed import experiment as tbm
 from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
+from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
+from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
+from markerplace.imaging.visibility import marker_points, markers_in_view
 from markerplace.markers import Marker
+from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
+from markerplace.testbed import evaluation as ev
+from markerplace.testbed.images import TestbedImaging
 
 
 def _box_scene(size=4.0, height=2.7):
@@ -49,33 +53,36 @@ def test_markers_in_view_projection_margin_and_occlusion():
     ahead = Marker(0, 0.4, world_from_marker_pose(np.array([4.0, 2.0, 1.5]), np.array([-1.0, 0, 0])))
     behind = Marker(1, 0.4, world_from_marker_pose(np.array([0.0, 2.0, 1.5]), np.array([1.0, 0, 0])))
     side = Marker(2, 0.4, world_from_marker_pose(np.array([2.5, 4.0, 1.5]), np.array([0, -1.0, 0])))
-    samples = tbm.marker_samples([ahead, behind, side], grid=7)
+    def samples_of(markers):
+        return marker_points(np.array([m.world_from_marker for m in markers]), [m.size for m in markers], grid=7)
+
+    samples = samples_of([ahead, behind, side])
     assert samples.shape == (3, 49, 3)
-    vis = tbm.markers_in_view(depth, cam, K, samples, margin_px=16, tolerance=0.1)
+    vis = markers_in_view(depth, cam, K, samples, margin_px=16, tolerance=0.1)
     # 'ahead' sits at 2 m depth but the wall there is at 2 m -> visible; 'behind' is behind the
     # camera; 'side' projects far outside the 90 deg field of view.
     assert vis.tolist() == [True, False, False]
-    occluded = tbm.markers_in_view(np.full((450, 600), 1.0, np.float32), cam, K, samples, 16, 0.1)
+    occluded = markers_in_view(np.full((450, 600), 1.0, np.float32), cam, K, samples, 16, 0.1)
     assert occluded.tolist() == [False, False, False]
     # a marker just outside the image border still counts inside the margin
     edge = Marker(3, 0.2, world_from_marker_pose(np.array([4.0, 4.3, 1.5]), np.array([-1.0, 0, 0])))
-    s = tbm.marker_samples([edge], grid=7)
-    assert tbm.markers_in_view(depth, cam, K, s, margin_px=40, tolerance=0.1).tolist() == [True]
-    assert tbm.markers_in_view(depth, cam, K, s, margin_px=0, tolerance=0.1).tolist() == [False]
+    s = samples_of([edge])
+    assert markers_in_view(depth, cam, K, s, margin_px=40, tolerance=0.1).tolist() == [True]
+    assert markers_in_view(depth, cam, K, s, margin_px=0, tolerance=0.1).tolist() == [False]
 
 
 def test_feature_set_round_trip_and_replace(tmp_path):
     rng = np.random.default_rng(0)
 
     def img(n, t):
-        return tbm.ImageFeatures(rng.random((n, 2), np.float32), rng.integers(0, 255, (n, 128)).astype(np.uint8),
+        return ImageFeatures(rng.random((n, 2), np.float32), rng.integers(0, 255, (n, 128)).astype(np.uint8),
                                  rng.random((n, 3)).astype(np.float32), np.arange(t, dtype=np.int32),
                                  rng.random((t, 4, 2)).astype(np.float32))
 
-    fs = tbm.FeatureSet.from_images([img(5, 0), img(0, 1), img(3, 2)])
+    fs = FeatureSet.from_images([img(5, 0), img(0, 1), img(3, 2)])
     assert len(fs) == 3 and fs.offsets.tolist() == [0, 5, 5, 8] and fs.tag_offsets.tolist() == [0, 0, 1, 3]
     fs.save(tmp_path / "f")
-    back = tbm.FeatureSet.load(tmp_path / "f", mmap=True)
+    back = FeatureSet.load(tmp_path / "f", mmap=True)
     assert np.array_equal(back.descriptors, fs.descriptors) and np.array_equal(back.image(2).tag_corners, fs.image(2).tag_corners)
     new = img(7, 1)
     rep = back.with_images({1: new})
@@ -90,14 +97,16 @@ def test_render_reuse_identical_without_marker_in_view():
     unseen = Marker(6, 0.4, world_from_marker_pose(np.array([0.0, 2.0, 1.5]), np.array([1.0, 0, 0])))
     poses = np.stack([world_from_cam_pose(np.array([2.0, 2.0, 1.5]), 0.0),
                       world_from_cam_pose(np.array([2.0, 2.0, 1.5]), np.pi)])
-    cfg = tbm.TestbedConfig(workers=1)
-    with tbm.Testbed(_BoxSpec(), cfg, [seen, unseen], progress=False) as tb:
-        base = tb.render_features(poses, [0, 1], [], True, False, "base")
-        marked = tb.render_features(poses, [0, 1], [seen], False, False, "with marker")
-    vis = np.stack([base[0][1], base[1][1]])
+    tb = TestbedImaging(_BoxSpec(), ImagingConfig(sift=SIFT_DEFAULT), [seen, unseen], InProcessExecutor(), progress=False)
+    with tb.executor:
+        base = tb.render(poses, [0, 1], [], False, "base")
+        marked = tb.render(poses, [0, 1], [seen], False, "with marker")
+    vis = np.stack([base[0].extras["in_view"], base[1].extras["in_view"]])
     assert vis.tolist() == [[True, False], [False, True]]
     assert tb.view_keys(vis, [seen]) == [(0,), ()]
     assert tb.view_keys(vis, []) == [(), ()]
+    base = {i: (f, None) for i, f in base.items()}
+    marked = {i: (f, None) for i, f in marked.items()}
     # pose 1 looks away from 'seen': features identical with and without it
     assert np.array_equal(base[1][0].descriptors, marked[1][0].descriptors)
     assert np.array_equal(base[1][0].keypoints, marked[1][0].keypoints)
@@ -175,10 +184,10 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     assert errs["weighted_t_err"].shape == (4, 20) and errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform"]
     # same test poses for every method: one file per test set, identical on a re-run
     poses = ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
-    results = sorted((out / "cache").glob("results_*.npz"))
+    results = sorted((out / "cache" / "predictions").glob("*.npz"))
     assert len(results) == 8
     stamps = [p.stat().st_mtime_ns for p in results]
-    assert main(args) == 0  # resume: every placement's query results are reused
+    assert main(args) == 0  # resume: every placement's predictions are reused
     assert [p.stat().st_mtime_ns for p in results] == stamps
     assert np.array_equal(ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam, poses)
     assert list(csv.DictReader((out / "recall.csv").open())) == rows
@@ -191,3 +200,29 @@ def test_evaluate_bad_option_is_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--tag-scale" in err[0]
     assert main(["evaluate", "tiny", "--out", str(tmp_path / "x"), "--k", "5,a", "--quiet"]) == 2
+
+
+def test_feature_writer_streams_parts_and_resumes(tmp_path):
+    """Parts written by an interrupted run with the same key are reused; other keys' parts are
+    dropped; the assembled folder holds the images in order with their extras."""
+    rng = np.random.default_rng(1)
+    imgs = [ImageFeatures(rng.random((n, 2), np.float32), rng.integers(0, 255, (n, 128)).astype(np.uint8),
+                          rng.random((n, 3)).astype(np.float32), extras={"flag": np.array([n % 2 == 0, True])})
+            for n in (3, 0, 5, 2, 4)]
+    w = FeatureWriter(tmp_path / "f", 5, "key-a", part_size=2)
+    for i in (4, 1, 3):  # arrives in any order; the run stops before images 0 and 2
+        w.add(i, imgs[i])
+    w.flush()
+    assert FeatureWriter(tmp_path / "f", 5, "key-b").done() == set()  # other settings: dropped
+    for i in (4, 1, 3):
+        w.add(i, imgs[i])
+    w.flush()
+    again = FeatureWriter(tmp_path / "f", 5, "key-a", part_size=2)
+    assert again.done() == {1, 3, 4}
+    for i in (0, 2):
+        again.add(i, imgs[i])
+    fs = again.finish()
+    assert fs.offsets.tolist() == [0, 3, 3, 8, 10, 14] and not (tmp_path / "f" / "parts").exists()
+    for i, f in enumerate(imgs):
+        assert np.array_equal(fs.image(i).descriptors, f.descriptors)
+        assert np.array_equal(fs.extras["flag"][i], f.extras["flag"])

@@ -204,7 +204,7 @@ def check_plan_config(config) -> None:
     CLEARANCE.check(d.clearance)
     YAWS.check(d.num_yaws)
     MARKER_SPACING.check(d.marker_spacing)
-    WORKERS.check(config.observe.workers)
+    WORKERS.check(config.runtime.workers)
     if d.start is not None:
         for v in d.start:
             if not math.isfinite(float(v)):

@@ -50,7 +50,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .options import plan_config_from_args, plan_inputs_in_scene_frame
     from ..testbed.evaluation import find_placement_files, method_names, validate_evaluate_config
     from ..markers import load_markers
-    from ..plan.observe import SceneSpec
+    from ..scene.spec import SceneSpec
     from ..plan.planner import validate
     from ..testbed.experiment import run_evaluation
     from ..output_checks import check_output_dir
@@ -69,11 +69,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))
-    run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,
-                   progress=not getattr(args, "quiet", False))
-    text = (Path(args.out) / "tables.md").read_text()
-    first = text.split("## All thresholds")[0].strip()
-    print(first)
+    result = run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,
+                            progress=not getattr(args, "quiet", False))
+    print(result.summary)
     print(f"\nwrote {args.out}/recall.csv, tables.md, recall_vs_k.png, query_errors.npz, timings.json, config.json")
     return 0
 

@@ -65,8 +65,8 @@ def plan_config_from_args(args: argparse.Namespace):
     from dataclasses import replace
 
     from ..plan.discretize import DiscretizeConfig
-    from ..plan.observe import ObserveConfig
     from ..plan.planner import PlacementConfig, PlanConfig
+    from ..runtime.executor import RuntimeConfig
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
@@ -74,7 +74,8 @@ def plan_config_from_args(args: argparse.Namespace):
     placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
                                 marker_model=args.marker_model, tag_size=args.tag_size,
                                 similarity=not args.no_similarity, seed=args.placement_seed)
-    return PlanConfig(discretize=disc, observe=ObserveConfig(workers=args.workers), placement=placement)
+    runtime = RuntimeConfig(workers=args.workers, cluster=args.cluster)
+    return PlanConfig(discretize=disc, placement=placement, runtime=runtime)
 
 
 def add_plan_args(p: argparse.ArgumentParser) -> None:
@@ -99,7 +100,10 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
     randomized = "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
     g.add_argument("--placement-seed", type=int, default=0, help=f"seed of the {randomized} placements (default 0)")
-    g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4)")
+    g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4; 1 = in this process)")
+    g.add_argument("--cluster", default=None, metavar="local:N|tcp://HOST:PORT",
+                   help="run rendering + SIFT on a Dask cluster: local:N starts N local workers, an address uses a "
+                        "running scheduler (results do not depend on where they run)")
     g.add_argument("--force", action="store_true",
                    help="run even when the size guard estimates more poses, memory or time than the limits "
                         "(200,000 poses, 80%% of this machine's memory, 12 h)")

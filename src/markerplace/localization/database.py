@@ -1,18 +1,12 @@
 """Map database for localization: per-image features with 3D points, VLAD, tag index.
 
-Storage is one HDF5 file with concatenated arrays and offsets (no pickle)::
-
-    /poses            (M, 4, 4) float64  world_from_cam of each map image
-    /feature_offsets  (M + 1,)  int64    image i owns features [off[i], off[i+1])
-    /keypoints        (N, 2)    float32  pixel (x, y)
-    /descriptors      (N, 128)  float32  SIFT
-    /points_world     (N, 3)    float64  world metres
-    /tag_offsets      (M + 1,)  int64
-    /tag_ids          (T,)      int64    ids detected in each image
-    /vlad             (M, D)    float32  unit VLAD vectors
-    /codebook         (C, 128)  float32  VLAD centres
-    /markers/tag_id (k,) int64, /markers/size (k,), /markers/world_from_marker (k, 4, 4)
-    attrs: format, version
+In memory, concatenated arrays with offsets: ``poses`` (M, 4, 4) ``world_from_cam`` of each
+map image; image i owns features ``offsets[i]:offsets[i+1]`` of ``keypoints`` (N, 2) float32
+pixels, ``descriptors`` (N, 128) float32 SIFT, ``points_world`` (N, 3) float64 world metres;
+tags ``tag_offsets[i]:tag_offsets[i+1]`` of ``tag_ids``; ``vlad`` (M, D) unit VLAD vectors; the
+codebook and the markers. On disk a map is a feature folder
+(:mod:`markerplace.imaging.features`, written by :func:`markerplace.testbed.maps.save_map`):
+the database is built from it in each worker.
 
 Only features with finite 3D points are kept.
 """
@@ -21,13 +15,10 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..errors import UserError
-from ..io_utils import atomic_path
 from ..markers import Marker
 from .features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
 from .tags import detect_tags
@@ -35,8 +26,6 @@ from .vlad import VladCodebook
 
 log = logging.getLogger(__name__)
 
-FORMAT = "markerplace-map-db"
-VERSION = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,53 +157,3 @@ class MapDatabase:
         )
         log.info("map database: %d images, %d features, %d markers", len(db), db.num_features, len(db.markers))
         return db
-
-    def save(self, path: str | Path) -> None:
-        """Write to HDF5 atomically."""
-        import h5py
-
-        with atomic_path(path) as tmp:
-            with h5py.File(tmp, "w") as f:
-                f.attrs["format"] = FORMAT
-                f.attrs["version"] = VERSION
-                for name in ("poses", "keypoints", "descriptors", "points_world", "tag_ids", "vlad"):
-                    f.create_dataset(name, data=getattr(self, name))
-                f.create_dataset("feature_offsets", data=self.offsets)
-                f.create_dataset("tag_offsets", data=self.tag_offsets)
-                f.create_dataset("codebook", data=self.codebook.centres)
-                ms = [self.markers[k] for k in sorted(self.markers)]
-                g = f.create_group("markers")
-                g.create_dataset("tag_id", data=np.array([m.tag_id for m in ms], np.int64))
-                g.create_dataset("size", data=np.array([m.size for m in ms], np.float64))
-                g.create_dataset("world_from_marker", data=np.array([m.world_from_marker for m in ms], np.float64).reshape(-1, 4, 4))
-
-    @classmethod
-    def load(cls, path: str | Path) -> "MapDatabase":
-        """Read a database written by :meth:`save`. Raises :class:`UserError` on a wrong file."""
-        import h5py
-
-        path = Path(path)
-        if not path.is_file():
-            raise UserError(f"map database not found: {path}")
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise UserError(f"{path} is not a markerplace map database: rebuild it with the simulate stage")
-            if int(f.attrs.get("version", -1)) != VERSION:
-                raise UserError(f"{path} has map database version {f.attrs.get('version')}, expected {VERSION}: rebuild it")
-            g = f["markers"]
-            markers = {
-                int(t): Marker(int(t), float(s), np.asarray(T))
-                for t, s, T in zip(g["tag_id"][()], g["size"][()], g["world_from_marker"][()])
-            }
-            return cls(
-                poses=f["poses"][()],
-                offsets=f["feature_offsets"][()],
-                keypoints=f["keypoints"][()],
-                descriptors=f["descriptors"][()],
-                points_world=f["points_world"][()],
-                tag_offsets=f["tag_offsets"][()],
-                tag_ids=f["tag_ids"][()],
-                vlad=f["vlad"][()],
-                codebook=VladCodebook(f["codebook"][()]),
-                markers=markers,
-            )

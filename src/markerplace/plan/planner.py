@@ -15,11 +15,18 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import UserError
+from ..imaging.config import ImagingConfig
+from ..imaging.features import FeatureSet
+from ..io_utils import write_npz
+from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
 from ..runtime import cache
+from ..runtime.executor import RuntimeConfig, make_executor
+from ..runtime.stages import cached
+from ..scene.spec import SceneSpec
 from .discretize import DiscretizeConfig, Discretization, discretize
 from .discretize import load as load_discretization
 from .discretize import save as save_discretization
-from ..errors import UserError
 from .localizability import (
     NoiseConfig,
     entropy,
@@ -27,8 +34,7 @@ from .localizability import (
     marker_visibility,
     pose_information,
 )
-from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
-from .observe import ObserveConfig, Observations, SceneSpec, observe
+from .observe import observe
 from .marker_models import MARKER_MODELS, get_marker_model
 from .methods import PLACEMENT_METHODS, method_from_config
 from .placement import MarkerCoverage, apply_coverages
@@ -73,13 +79,18 @@ class PlacementConfig:
 
 @dataclass(frozen=True)
 class PlanConfig:
-    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory."""
+    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory.
+
+    ``runtime`` (where the per-image work runs) changes speed, never results: it is left out of
+    every cache key.
+    """
 
     discretize: DiscretizeConfig = field(default_factory=DiscretizeConfig)
-    observe: ObserveConfig = field(default_factory=ObserveConfig)
+    imaging: ImagingConfig = field(default_factory=ImagingConfig)
     similarity: SimilarityConfig = field(default_factory=SimilarityConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
 
     def __post_init__(self) -> None:
         """Derive ``discretize.tag_size`` from ``placement.tag_size`` (the one home of the tag
@@ -122,7 +133,7 @@ def validate(config: PlanConfig) -> None:
 
 def geometric_visibility(world_from_cam: np.ndarray, world_from_markers: np.ndarray, config: PlanConfig) -> np.ndarray:
     """(N, C) bool: range, field of view and viewing angle (no occlusion) for each marker pose."""
-    intr = config.observe.intrinsics
+    intr = config.imaging.camera
     out = np.zeros((len(world_from_cam), len(world_from_markers)), dtype=bool)
     for c, T in enumerate(world_from_markers):
         out[:, c] = marker_visibility(world_from_cam, T, intr.K, (intr.width, intr.height), max_range=config.noise.max_range)
@@ -134,7 +145,7 @@ def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, 
     """One :class:`MarkerCoverage` per marker pose from the (N, C) visibility mask, with the
     information of ``config.placement.marker_model`` (:mod:`markerplace.plan.marker_models`)."""
     model = get_marker_model(config.placement.marker_model, noise=config.noise)
-    K = config.observe.intrinsics.K
+    K = config.imaging.camera.K
     covs = []
     for c, T in enumerate(world_from_markers):
         idx = np.flatnonzero(visible[:, c])
@@ -144,15 +155,18 @@ def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, 
 
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
-            existing: Sequence[Marker] = (), progress: bool = True) -> PlanData:
+            existing: Sequence[Marker] = (), progress: bool = True, executor=None) -> PlanData:
     """Run (or reuse) discretize, observe, similarity and scoring for a scene.
 
     Args:
         scene_spec: the scene to plan in.
         config: all settings.
-        run_dir: directory for artifacts (created).
+        run_dir: directory for artifacts (created): ``discretization.npz``, ``observations/``
+            (a feature folder), ``similarity.npz``, each with its ``.meta.json``.
         existing: markers already on the walls; they count as placed.
         progress: progress bars on long stages.
+        executor: where per-pose work runs (default: one made from ``config.runtime`` for
+            this call).
     """
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -161,17 +175,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     scene = scene_spec.load()
     timings["load"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
     disc_key = cache.hash_of("discretize-v2", cache.scene_hash(scene), config.discretize)
-    disc_path = run_dir / "discretization.npz"
-    disc = cache.load_fresh(disc_path, disc_key, load_discretization)
-    if disc is not None:
-        log.info("discretize: reusing %s", disc_path)
-    else:
-        disc = discretize(scene, config.discretize)
-        save_discretization(disc, disc_path)
-        cache.mark_done(disc_path, disc_key)
-    timings["discretize"] = time.perf_counter() - t0
+    disc = cached("discretize", run_dir / "discretization.npz", disc_key, lambda: discretize(scene, config.discretize),
+                  save_discretization, load_discretization, timings)
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
              len(disc.locations), config.discretize.num_yaws, N, C)
@@ -181,44 +187,38 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     sizes = [config.placement.tag_size] * C + [m.size for m in existing]
     in_view = geometric_visibility(disc.world_from_cam, all_T, config)
 
-    t0 = time.perf_counter()
-    # the worker count changes speed, not results: keep it out of the key
-    obs_key = cache.hash_of("observe-v1", disc_key, replace(config.observe, workers=0), all_T, sizes)
-    obs_path = run_dir / "observations.h5"
-    obs = cache.load_fresh(obs_path, obs_key, Observations.load)
-    if obs is not None:
-        log.info("observe: reusing %s", obs_path)
-    else:
-        log.info("observe: rendering and extracting SIFT at %d poses", N)
-        obs = observe(scene_spec, disc.world_from_cam, in_view, all_T, np.asarray(sizes, float), config.observe, progress=progress)
-        obs.save(obs_path)
-        cache.mark_done(obs_path, obs_key)
-    timings["observe"] = time.perf_counter() - t0
-    log.info("observe: %d features with 3D points (%.0f per pose)", len(obs.pose_index), len(obs.pose_index) / max(N, 1))
+    obs_key = cache.hash_of("observe-v2", disc_key, config.imaging, all_T, sizes)
 
-    t0 = time.perf_counter()
+    def run_observe() -> FeatureSet:
+        log.info("observe: rendering and extracting SIFT at %d poses", N)
+        own = executor is None
+        ex = make_executor(config.runtime) if own else executor
+        try:
+            return observe(scene_spec, disc.world_from_cam, in_view, all_T, np.asarray(sizes, float), config.imaging,
+                           ex, run_dir / "observations", obs_key, progress=progress)
+        finally:
+            if own:
+                ex.close()
+
+    obs = cached("observe", run_dir / "observations", obs_key, run_observe, None, FeatureSet.load, timings)
+    points, descriptors, pose_index = obs.points_world, obs.descriptors, obs.image_index
+    log.info("observe: %d features with 3D points (%.0f per pose)", len(pose_index), len(pose_index) / max(N, 1))
+
     if config.placement.similarity:
         sim_key = cache.hash_of("similarity-v1", obs_key, config.similarity)
-        sim_path = run_dir / "similarity.npz"
-        n_similar = cache.load_fresh(sim_path, sim_key, lambda p: np.load(p, allow_pickle=False)["n_similar"])
-        if n_similar is not None:
-            log.info("similarity: reusing %s", sim_path)
-        else:
-            n_similar = count_similar(obs.descriptors, obs.points_world, config.similarity)
-            from ..io_utils import write_npz
-
-            write_npz(sim_path, n_similar=n_similar)
-            cache.mark_done(sim_path, sim_key)
+        n_similar = cached("similarity", run_dir / "similarity.npz", sim_key,
+                           lambda: count_similar(descriptors, points, config.similarity),
+                           lambda n, path: write_npz(path, n_similar=n),
+                           lambda path: np.load(path, allow_pickle=False)["n_similar"], timings)
     else:
-        n_similar = np.zeros(len(obs.pose_index), dtype=np.int32)
-    timings["similarity"] = time.perf_counter() - t0
+        n_similar = np.zeros(len(pose_index), dtype=np.int32)
+        timings["similarity"] = 0.0
 
     t0 = time.perf_counter()
-    K = config.observe.intrinsics.K
-    base_info = pose_information(disc.world_from_cam, K, obs.points_world.astype(float), obs.pose_index,
+    base_info = pose_information(disc.world_from_cam, config.imaging.camera.K, np.asarray(points, float), pose_index,
                                  n_similar, config.noise)
     base_score = -entropy(base_info)
-    visible = in_view & obs.candidate_unoccluded
+    visible = in_view & np.asarray(obs.extras["candidate_unoccluded"])
     # a tag that no camera pose sees helps nobody: never offer it to any method
     seen = visible[:, :C].any(axis=0)
     if not seen.all():

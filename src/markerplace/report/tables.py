@@ -130,16 +130,20 @@ def thresholds_table(rows: Sequence[dict], thresholds: Sequence[str], ks: Sequen
     return "\n".join(lines)
 
 
-def tables_markdown(rows: Sequence[dict], ks: Sequence[int], main_threshold: str,
-                    thresholds: Sequence[str]) -> str:
-    """The whole ``tables.md``: one Table-I-like table per test set at the main threshold, then
-    the table of all thresholds."""
+def main_tables_markdown(rows: Sequence[dict], ks: Sequence[int], main_threshold: str) -> str:
+    """One Table-I-like table per test set at the main threshold (what ``evaluate`` prints)."""
     parts = ["# Localization recall (%)", ""]
     for ts in dict.fromkeys(r["test_set"] for r in rows):
         parts += [f"## Test set `{ts}`, recall at {main_threshold} (mean ± std over runs)", "",
                   method_table(rows, ts, main_threshold, ks), ""]
-    parts += ["## All thresholds", "", thresholds_table(rows, thresholds, ks), ""]
     return "\n".join(parts)
+
+
+def tables_markdown(rows: Sequence[dict], ks: Sequence[int], main_threshold: str,
+                    thresholds: Sequence[str]) -> str:
+    """The whole ``tables.md``: :func:`main_tables_markdown`, then the table of all thresholds."""
+    return main_tables_markdown(rows, ks, main_threshold) + "\n" + "\n".join(
+        ["## All thresholds", "", thresholds_table(rows, thresholds, ks), ""])
 
 
 def recall_curves(rows: Sequence[dict], scene: str, test_set: str, threshold: str,

@@ -211,10 +211,11 @@ class DaskExecutor(Executor):
                 raise UserError(f"--cluster {address!r}: give local:N with N workers, e.g. local:2") from None
             if n < 1:
                 raise UserError(f"--cluster {address!r}: N must be at least 1")
+            logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger("markerplace").level))
             env = {k: "1" for k in THREAD_ENV}
             with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                             dashboard_address=None)
+                                             dashboard_address=":0")
             self.client = Client(self._cluster)
         else:
             try:

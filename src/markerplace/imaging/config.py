@@ -1,0 +1,35 @@
+"""Settings of the imaging engine: the camera, the feature preset and the visibility tests."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..geometry import Intrinsics
+from ..localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
+
+__all__ = ["ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT"]
+
+
+@dataclass(frozen=True)
+class ImagingConfig:
+    """How an image is made and read.
+
+    Attributes:
+        camera: pinhole intrinsics of every render (paper: 600x450, 90 deg horizontal FOV).
+            The one home of the camera: planning, scoring and the testbed read it from here.
+        sift: feature preset: the paper's scoring preset (1000 features, contrast 0.1, edge 5)
+            for planning, OpenCV defaults for localization (``SIFT_DEFAULT``).
+        max_depth: features farther than this get no 3D point, metres.
+        occlusion_tolerance: a marker sample counts as hidden only when the rendered surface is
+            closer than the sample by more than this, metres.
+        visibility_margin_px: for "may this marker change the image": samples up to this many
+            pixels outside the image still count as inside (conservative).
+        visibility_grid: samples per side of a marker's drawn quad for that test.
+    """
+
+    camera: Intrinsics = field(default_factory=Intrinsics)
+    sift: SiftConfig = SIFT_SCORING
+    max_depth: float = 10.0
+    occlusion_tolerance: float = 0.10
+    visibility_margin_px: float = 16.0
+    visibility_grid: int = 7

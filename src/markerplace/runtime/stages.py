@@ -1,0 +1,53 @@
+"""Stages as functions over artifacts (hloc's ``main(conf, ...) -> Path``): one helper runs a
+stage or reuses its artifact.
+
+:func:`cached` looks for ``path`` made from inputs hashing to ``key`` (checksum verified, see
+:mod:`markerplace.runtime.cache`); when it is there and loads, the stage is skipped; otherwise
+``compute()`` runs, ``save(result, path)`` writes the artifact (atomically, or as a folder that
+is only marked done once complete) and the key is recorded. An interrupted stage leaves no
+record and runs again (stages that stream to disk resume from their parts).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Callable, TypeVar
+
+from . import cache
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+__all__ = ["cached"]
+
+
+def cached(name: str, path: str | Path, key: str, compute: Callable[[], T], save: Callable[[T, Path], None] | None,
+           load: Callable[[Path], T], timings: dict | None = None, **meta) -> T:
+    """The artifact of stage ``name`` at ``path``: reused when fresh, else computed and saved.
+
+    Args:
+        name: stage name for the log and ``timings``.
+        path: artifact file or folder.
+        key: hash of everything the artifact depends on (:func:`~markerplace.runtime.cache.hash_of`).
+        compute: runs the stage; returns the result.
+        save: writes the result to ``path`` (None: ``compute`` wrote it itself).
+        load: reads the artifact back.
+        timings: if given, ``timings[name]`` gets the stage's seconds.
+        meta: extra fields recorded in the artifact's ``.meta.json``.
+    """
+    path = Path(path)
+    t0 = time.perf_counter()
+    result = cache.load_fresh(path, key, load)
+    if result is not None:
+        log.info("%s: reusing %s", name, path)
+    else:
+        result = compute()
+        if save is not None:
+            save(result, path)
+        cache.mark_done(path, key, **meta)
+    if timings is not None:
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+    return result

@@ -1,0 +1,140 @@
+"""Map and test images of the testbed: rendered by the imaging engine, features re-used across
+placements.
+
+Renders are deterministic, so an image whose view holds no marker of a placement equals the
+marker-free image: its features come from the marker-free set, computed once per image set
+(:class:`BaseImages`). More generally an image only depends on the markers in its view, so
+features are keyed by ``(image, markers in view)`` and shared between placements with the same
+markers in that view (e.g. the nested OMP prefixes). "In view" is decided conservatively on the
+marker-free depth (:func:`markerplace.imaging.visibility.markers_in_view`, union of every
+evaluated marker).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
+from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
+from ..imaging.visibility import marker_points
+from ..io_utils import write_npy
+from ..markers import Marker
+from ..runtime import cache
+
+log = logging.getLogger(__name__)
+
+__all__ = ["TestbedImaging", "BaseImages"]
+
+
+def _render_task(engine: ImagingEngine, item) -> ImageFeatures:
+    """(world_from_cam, markers, map_only) -> features of the render with those markers; a
+    marker-free render also carries ``extras['in_view']``, the (U,) union-marker in-view mask."""
+    world_from_cam, markers, map_only = item
+    res = engine.render(world_from_cam, markers)
+    feats = engine.features(res, tags=True)
+    if map_only:
+        feats = feats.with_3d_only()
+    if not markers:
+        feats = ImageFeatures(feats.keypoints, feats.descriptors, feats.points_world, feats.tag_ids,
+                              feats.tag_corners, {"in_view": engine.in_view(res, "union")})
+    return feats
+
+
+def _in_view_task(engine: ImagingEngine, world_from_cam) -> np.ndarray:
+    """(U,) union-marker in-view mask from a marker-free depth render."""
+    return engine.in_view(engine.render(world_from_cam, (), rgb=False), "union")
+
+
+class TestbedImaging:
+    """Renders testbed images on an executor: every worker keeps one imaging engine whose
+    ``union`` sample set holds every marker any evaluated placement uses.
+
+    Args:
+        scene_spec: how workers rebuild the scene.
+        config: the testbed's :class:`~markerplace.imaging.config.ImagingConfig`.
+        union_markers: every marker of every evaluated placement.
+        executor: where the work runs.
+        progress: progress bars.
+    """
+
+    __test__ = False
+
+    def __init__(self, scene_spec, config, union_markers: Sequence[Marker], executor, progress: bool = True):
+        self.config = config
+        self.union = list(union_markers)
+        self.union_index = {marker_key(m): i for i, m in enumerate(self.union)}
+        T = np.array([m.world_from_marker for m in self.union]).reshape(-1, 4, 4)
+        self.samples = marker_points(T, [m.size for m in self.union], grid=config.visibility_grid) \
+            if self.union else np.zeros((0, config.visibility_grid ** 2, 3))
+        self.spec = EngineSpec(scene_spec, config, {"union": self.samples})
+        self.job = imaging_job(self.spec)
+        self.executor = executor
+        self.progress = progress
+
+    def run(self, task, items: list, desc: str):
+        """``(index, task(engine, items[index]))`` for every item, with a progress bar."""
+        from tqdm import tqdm
+
+        with tqdm(total=len(items), desc=desc, unit="img", disable=not self.progress, leave=False) as bar:
+            for i, r in self.executor.map(task, items, self.job):
+                bar.update()
+                yield i, r
+
+    def render(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
+               map_only: bool, desc: str) -> dict[int, ImageFeatures]:
+        """Features of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with ``markers``."""
+        indices = [int(i) for i in indices]
+        items = [(world_from_cam[i], list(markers), map_only) for i in indices]
+        return {indices[j]: f for j, f in self.run(_render_task, items, desc)}
+
+    def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple[int, ...]]:
+        """Per image: sorted union indices of ``markers`` in view, from the (N, U) base mask."""
+        idx = np.array([self.union_index[marker_key(m)] for m in markers], dtype=np.int64)
+        if len(idx) == 0:
+            return [()] * len(in_view)
+        sub = np.asarray(in_view)[:, idx]
+        return [tuple(sorted(idx[row].tolist())) for row in sub]
+
+
+class BaseImages:
+    """Marker-free features (``features/``) and the (N, U) union-marker in-view mask
+    (``in_view.npy``) of one image set, cached in ``folder``: features are keyed without
+    markers, the mask with the union (a new placement only costs depth renders)."""
+
+    def __init__(self, imaging: TestbedImaging, world_from_cam: np.ndarray, folder: Path, key: str, map_only: bool,
+                 name: str):
+        self.folder = Path(folder)
+        self.world_from_cam = np.asarray(world_from_cam, float)
+        N = len(world_from_cam)
+        feat_key = cache.hash_of("base-features-v2", key, map_only, imaging.config)
+        mask_key = cache.hash_of(feat_key, imaging.samples, imaging.config.visibility_margin_px,
+                                 imaging.config.occlusion_tolerance)
+        feat_dir, mask_path = self.folder / "features", self.folder / "in_view.npy"
+        mask = None
+        feats = cache.load_fresh(feat_dir, feat_key, FeatureSet.load) if FeatureSet.exists(feat_dir) else None
+        if feats is not None:
+            log.info("%s: reusing marker-free features in %s", name, feat_dir)
+        else:
+            writer = FeatureWriter(feat_dir, N, feat_key + mask_key)
+            done = writer.done()
+            todo = [i for i in range(N) if i not in done]
+            for i, f in imaging.render(world_from_cam, todo, [], map_only, f"{name} (no markers)").items():
+                writer.add(i, f)
+            feats = writer.finish()
+            mask = np.asarray(feats.extras.pop("in_view")).reshape(N, -1)
+            (feat_dir / "extra_in_view.npy").unlink(missing_ok=True)
+            cache.mark_done(feat_dir, feat_key)
+        if mask is None:
+            mask = cache.load_fresh(mask_path, mask_key, lambda p: np.load(p, allow_pickle=False))
+        if mask is None:  # features cached, markers changed: depth-only renders
+            got = dict(imaging.run(_in_view_task, [world_from_cam[i] for i in range(N)], f"{name} (marker visibility)"))
+            mask = np.stack([got[i] for i in range(N)]).reshape(N, -1) if N else np.zeros((0, len(imaging.union)), bool)
+        if not cache.is_fresh(mask_path, mask_key):
+            write_npy(mask_path, mask)
+            cache.mark_done(mask_path, mask_key)
+        self.features = feats
+        self.in_view = mask.reshape(N, len(imaging.union))

@@ -1,0 +1,81 @@
+"""Map databases per placement, and localizing test images against them on the executor.
+
+A placement's map database is a folder (:func:`save_map`): the map images' features (a
+:class:`~markerplace.imaging.features.FeatureSet`, memory-mapped by the workers), their poses,
+the placement's markers and the VLAD codebook. A worker builds the
+:class:`~markerplace.localization.database.MapDatabase` and the localizer once per folder and
+keeps them in its imaging engine's cache while it localizes that placement's queries.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..imaging.engine import ImagingEngine
+from ..imaging.features import FeatureSet, ImageFeatures
+from ..io_utils import write_json, write_npy
+from ..markers import Marker
+
+__all__ = ["save_map", "load_map_database", "localize_features", "localize_task"]
+
+
+def save_map(folder: str | Path, features: FeatureSet, world_from_cam: np.ndarray, markers: Sequence[Marker],
+             codebook_centres: np.ndarray) -> None:
+    """Write everything a worker needs to build one placement's map database into ``folder``:
+    the features, (N, 4, 4) map poses, the markers (JSON) and the (C, 128) VLAD centres."""
+    folder = Path(folder)
+    features.save(folder)
+    write_npy(folder / "poses.npy", np.asarray(world_from_cam, np.float64))
+    write_npy(folder / "codebook.npy", np.asarray(codebook_centres, np.float32))
+    write_json(folder / "markers.json", [m.to_json() for m in markers])
+
+
+def load_map_database(folder: str | Path):
+    """Build the :class:`~markerplace.localization.database.MapDatabase` saved by :func:`save_map`."""
+    from ..localization.database import MapDatabase
+    from ..localization.vlad import VladCodebook
+    from ..markers import marker_from_json
+
+    folder = Path(folder)
+    feats = FeatureSet.load(folder, mmap=True)
+    poses = np.load(folder / "poses.npy", allow_pickle=False)
+    codebook = VladCodebook(np.load(folder / "codebook.npy", allow_pickle=False))
+    markers = [marker_from_json(d) for d in json.loads((folder / "markers.json").read_text())]
+    images = []
+    for i in range(len(feats)):
+        f = feats.image(i)
+        images.append((poses[i], f.keypoints, f.descriptors.astype(np.float32), f.points_world, f.tag_ids))
+    return MapDatabase.build(images, markers, codebook)
+
+
+def _tag_detections(feats: ImageFeatures) -> list:
+    from ..localization.tags import TagDetection
+
+    return [TagDetection(int(t), np.asarray(c, np.float64), np.asarray(c, np.float64).mean(axis=0))
+            for t, c in zip(feats.tag_ids, feats.tag_corners)]
+
+
+def localize_features(localizer, feats: ImageFeatures):
+    """Localize precomputed query features (extracted once, reused across placements)."""
+    return localizer.localize_features(feats.keypoints, feats.descriptors.astype(np.float32), _tag_detections(feats))
+
+
+def localize_task(engine: ImagingEngine, item) -> np.ndarray:
+    """(db folder, localizer config, features | None, world_from_cam, markers) -> (4, 4)
+    estimate, all NaN on failure. With features None the query is first rendered here with
+    ``markers`` (its view holds some of them)."""
+    from ..localization.localizer import Localizer
+
+    folder, localizer_config, feats, world_from_cam, markers = item
+    if engine.cache.get("db_folder") != (folder, localizer_config):
+        engine.cache.pop("localizer", None)
+        engine.cache["localizer"] = Localizer(load_map_database(folder), engine.K, localizer_config)
+        engine.cache["db_folder"] = (folder, localizer_config)
+    if feats is None:
+        feats = engine.features(engine.render(world_from_cam, markers), tags=True)
+    res = localize_features(engine.cache["localizer"], feats)
+    return np.full((4, 4), np.nan) if res.world_from_cam is None else np.asarray(res.world_from_cam, float)

@@ -1,0 +1,79 @@
+"""Metrics of an evaluation, computed from its stored predictions: recall tables, paired
+differences, fixed/broken counts, recall vs k, per-query errors.
+
+Predictions (the estimated pose of every test image, per placement and test set) are stored
+apart from these metrics (:mod:`markerplace.testbed.predictions`), so the tables can be
+recomputed with other thresholds without localizing again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io_utils import atomic_path
+
+__all__ = ["write_outputs"]
+
+
+def write_outputs(out: Path, scene_name: str, placements, predictions: dict, test_poses: dict,
+                  base_score: np.ndarray, config, plan_config) -> tuple[list[dict], str]:
+    """recall.csv, query_errors.npz, tables.md, recall_vs_k.png and config.json from predictions.
+
+    Args:
+        out: the run folder.
+        scene_name: scene label of the tables.
+        placements: the evaluated :class:`~markerplace.testbed.evaluation.PlacementRun` list.
+        predictions: ``(method, run, k, test set) -> (N, 4, 4)`` estimated ``world_from_cam``
+            per test image (all NaN where localization failed).
+        test_poses: test set -> :class:`~markerplace.testbed.evaluation.TestPoses` (truth).
+        base_score: (M,) localizability score of each feasible pose without markers.
+        config, plan_config: the evaluate and plan settings.
+
+    Returns:
+        The recall rows and the markdown of the main table (first test set, main threshold).
+    """
+    from ..io_utils import write_json, write_npz
+    from ..report.figures import recall_vs_k
+    from ..report.paired import paired_markdown
+    from ..report.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
+    from ..runtime.cache import config_dict
+    from . import evaluation as ev
+
+    results = {key: ev.pose_errors_batch(est, test_poses[key[3]].world_from_cam) for key, est in predictions.items()}
+    labels = [ev.threshold_label(t) for t in config.thresholds]
+    rows = []
+    arrays: dict[str, np.ndarray] = {}
+    for ts in config.test_sets:
+        keys = [(p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, ts) in results]
+        for method, run, k in keys:
+            t_err, r_err = results[(method, run, k, ts)]
+            for label, (tm, rm) in zip(labels, config.thresholds):
+                rows.append(dict(scene=scene_name, method=method, run=run, k=k, test_set=ts, threshold=label,
+                                 recall=ev.recall(t_err, r_err, tm, rm), n_tests=len(t_err)))
+        arrays[f"{ts}_method"] = np.array([k[0] for k in keys], dtype=str)
+        arrays[f"{ts}_run"] = np.array([k[1] for k in keys], dtype=np.int64)
+        arrays[f"{ts}_k"] = np.array([k[2] for k in keys], dtype=np.int64)
+        arrays[f"{ts}_t_err"] = np.array([results[k + (ts,)][0] for k in keys]).reshape(len(keys), -1)
+        arrays[f"{ts}_r_err"] = np.array([results[k + (ts,)][1] for k in keys]).reshape(len(keys), -1)
+        arrays[f"{ts}_world_from_cam"] = test_poses[ts].world_from_cam
+        arrays[f"{ts}_score"] = np.asarray(base_score)[test_poses[ts].source_index]
+    write_recall_csv(out / "recall.csv", rows)
+    write_npz(out / "query_errors.npz", **arrays)
+    main = ev.threshold_label(ev.MAIN_THRESHOLD) if ev.MAIN_THRESHOLD in config.thresholds else labels[0]
+    ks = sorted(set(config.ks))
+    md = tables_markdown(rows, ks, main, labels)
+    summary = main_tables_markdown(rows, ks, main).strip()
+    t_main, r_main = next(t for t in config.thresholds if ev.threshold_label(t) == main)
+    hits = {ts: {(m, run, k): ev.hit_mask(*res, t_main, r_main)
+                 for (m, run, k, t), res in results.items() if t == ts} for ts in config.test_sets}
+    md += paired_markdown(hits, ks, main, seed=config.seed)
+    with atomic_path(out / "tables.md") as tmp:
+        tmp.write_text(md)
+    ts0 = config.test_sets[0]
+    curves = recall_curves(rows, scene_name, ts0, main, ks)
+    if curves:
+        recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
+    write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config)})
+    return rows, summary
