@@ -5,34 +5,57 @@ For every observed 3D point p, ``n_p`` counts the OTHER points whose descriptor 
 look-alikes far away, which would make a wrong place recognition costly. The score stage scales
 the point's prior sigma by ``sqrt(1 + n_p)``.
 
-Descriptors are L2-normalised here, so ``cos > t`` <=> ``||a - b||^2 < 2 - 2 t`` (0.2 for 0.9).
+Why FAISS: the search is a self-join of up to millions of 128-D descriptors, and FAISS
+(``faiss-cpu``) gives a tuned, multi-threaded exact index and inverted-file index with range
+search, so the project keeps no hand-written nearest-neighbour code. Descriptors are
+L2-normalised (float32), so the cosine is an inner product; both methods range-search with
+the threshold lowered by ``_BAND`` and then decide every candidate pair exactly:
+
+    * the 3D condition ``||p_i - p_j|| > min_distance`` in float64, on every candidate;
+    * the cosine: both indexes store the normalised vectors uncompressed (``IndexFlatIP``,
+      ``IndexIVFFlat``), so the inner product FAISS returns is the float32 cosine of the
+      original descriptors, within about 1e-5 of the float64 value (normalising and a 128-term
+      float32 dot product each err by at most ~D * 2^-24 relative). A pair more than
+      ``_BAND = 1e-4`` above the threshold is therefore a look-alike, one more than ``_BAND``
+      below is not, and the pairs in between are recomputed in float64 from the original
+      descriptors. The decision is the float64 brute-force decision for every pair found.
 
 Methods:
-    * ``exact``: blocked all-pairs (BLAS), O(P^2); for tests and small inputs.
-    * ``approx``: an inverted-file search. PCA to ``pca_dims`` dimensions (an orthogonal
-      projection never lengthens a difference, so the reduced-space radius test keeps every true
-      pair), k-means cells in the reduced space; cells whose centroids nearly coincide (a dense
-      blob of look-alikes that k-means over-splits) are merged, at most ``max_merge`` at a time.
-      Each cell searches the cells that the triangle inequality cannot rule out, at most
-      ``nprobe`` of them, nearest first; candidates are verified exactly in the full dimension
-      (cosine and 3D distance). The only approximation is the probe limit: a look-alike in a
-      cell that was not searched is missed, so counts can only be too low.
-      :func:`measure_error` reports the error against ``exact``.
-    * ``auto``: ``exact`` below ``exact_max_points`` points, else ``approx``.
+    * ``exact``: ``IndexFlatIP`` range search (BLAS, O(P^2 D)); finds every pair, so its counts
+      equal float64 brute force. Used up to ``exact_max_points`` points (the measured crossover
+      with ``ivf``, see ``benchmarks/similarity.py``).
+    * ``ivf``: ``IndexIVFFlat`` (inner product) with ``nlist`` cells from FAISS's spherical
+      k-means, trained on a seeded sample; each point is assigned once and searches its
+      ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search). The only
+      approximation is the probe limit: a look-alike in a cell that was not searched is missed,
+      so counts can only be too low, never too high. :func:`measure_error` reports how much.
+    * ``auto``: ``exact`` up to ``exact_max_points`` points, else ``ivf``.
+
+Determinism: the training sample and FAISS's k-means are seeded from ``seed``; FAISS runs on
+``threads`` OpenMP threads (restored afterwards). Every stage the result depends on is
+thread-count independent (k-means centroids are summed per centroid in point order, inverted
+lists are filled in point order, each query's search is independent), which the tests check.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
+import faiss
 import numpy as np
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_approx",
-           "measure_error", "benchmark_similarity", "synthetic_descriptors"]
+__all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_ivf",
+           "measure_error", "synthetic_descriptors"]
+
+# half-width of the band around the cosine threshold in which a pair's float32 cosine (from
+# FAISS) is not trusted and the cosine is recomputed in float64 (10x the float32 error bound)
+_BAND = 1e-4
 
 
 @dataclass(frozen=True)
@@ -42,47 +65,121 @@ class SimilarityConfig:
     Attributes:
         cos_threshold: descriptors with cosine similarity above this are similar (paper: 0.9).
         min_distance: only points farther than this (metres, 3D) count (paper: 2.0).
-        method: ``"auto"``, ``"exact"`` or ``"approx"`` (see module docstring).
-        exact_max_points: ``auto`` uses ``exact`` up to this many points.
-        pca_dims: dimensions of the reduced space used to generate candidates.
-        num_cells: k-means cells of the inverted file; 0 = ``clip(sqrt(nprobe P), 16, 8192)``.
-        nprobe: at most this many cells are searched per cell (those that can hold a partner,\n            nearest first by the triangle-inequality bound); more = higher recall, slower.
-        kmeans_sample: points used to fit PCA and k-means.
-        kmeans_iters: k-means iterations.
-        merge_radius: cells whose centroids lie within this fraction of the look-alike radius of
-            a leader cell are searched as one (k-means splits dense blobs of look-alikes into
-            many small cells, which a per-cell probe limit would otherwise miss).
-        max_merge: at most this many k-means cells form one merged cell (bounds the cost).
-        block: maximum elements of one distance block (memory: 4 bytes each, a few at a time).
-        seed: seed of the sampling and k-means initialisation.
+        method: ``"auto"``, ``"exact"`` or ``"ivf"`` (see module docstring). Default ``auto``.
+        exact_max_points: ``auto`` uses ``exact`` up to this many points (default 50,000).
+        nlist: IVF cells; 0 (default) = ``clip(round(nlist_factor * sqrt(P)), 16, 65536)``.
+        nlist_factor: cells per sqrt(point) when ``nlist`` is 0 (default 4).
+        nprobe: cells every point searches, nearest first (default 16); more = higher recall,
+            slower.
+        nprobe_max: a point whose farther half of the ``nprobe`` cells held a look-alike
+            candidate (any 3D distance) searches the next ``nprobe`` cells, then the next
+            ``2 nprobe``, ..., while the last ring still holds one, up to this many cells in all
+            (default 256; ``nprobe_max <= nprobe`` turns this off). Dense groups of look-alikes
+            (repeated texture) span many k-means cells; this finds them without raising
+            ``nprobe`` for every point.
+        train_points_per_cell: k-means training sample size per cell (default 40, FAISS's
+            recommended minimum is 39).
+        train_iters: k-means iterations (default 10).
+        batch: points per FAISS range-search call (default 16,384); bounds the memory of one
+            call's results (12 bytes per pair within the threshold, near pairs included).
+        threads: FAISS OpenMP threads; 0 (default) = the CPUs this process may run on. Results
+            do not depend on it.
+        seed: seed of the training sample and of FAISS's k-means (default 0).
     """
 
     cos_threshold: float = 0.9
     min_distance: float = 2.0
     method: str = "auto"
-    exact_max_points: int = 30000
-    pca_dims: int = 32
-    num_cells: int = 0
+    exact_max_points: int = 50000
+    nlist: int = 0
+    nlist_factor: float = 4.0
     nprobe: int = 16
-    kmeans_sample: int = 50000
-    kmeans_iters: int = 8
-    merge_radius: float = 0.7
-    max_merge: int = 16
-    block: int = 4_000_000
+    nprobe_max: int = 256
+    train_points_per_cell: int = 40
+    train_iters: int = 10
+    batch: int = 16384
+    threads: int = 0
     seed: int = 0
-
-
-def _normalise(descriptors: np.ndarray) -> np.ndarray:
-    X = np.ascontiguousarray(descriptors, dtype=np.float32)
-    n = np.linalg.norm(X, axis=1, keepdims=True)
-    return X / np.maximum(n, 1e-12)
 
 
 def _check(descriptors: np.ndarray, points_world: np.ndarray, config: SimilarityConfig) -> None:
     if descriptors.ndim != 2 or points_world.shape != (len(descriptors), 3):
         raise ValueError(f"descriptors (P, D) and points (P, 3) expected, got {descriptors.shape} and {points_world.shape}")
-    if config.method not in ("auto", "exact", "approx"):
-        raise ValueError(f"unknown similarity method {config.method!r}: use auto, exact or approx")
+    if config.method not in ("auto", "exact", "ivf"):
+        raise ValueError(f"unknown similarity method {config.method!r}: use auto, exact or ivf")
+    if not (-1.0 + _BAND < config.cos_threshold < 1.0 - _BAND):
+        raise ValueError(f"cos_threshold must lie in (-1, 1), got {config.cos_threshold}")
+    if config.min_distance < 0:
+        raise ValueError(f"min_distance must be >= 0, got {config.min_distance}")
+    if config.nprobe < 1 or config.batch < 1 or config.nlist < 0:
+        raise ValueError("nprobe and batch must be >= 1, nlist >= 0")
+
+
+@contextmanager
+def _faiss_threads(n: int):
+    """Run FAISS (and its OpenBLAS) on ``n`` OpenMP threads (0: the CPUs we may use)."""
+    if n <= 0:
+        n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    old = faiss.omp_get_max_threads()
+    faiss.omp_set_num_threads(int(n))
+    try:
+        yield
+    finally:
+        faiss.omp_set_num_threads(old)
+
+
+class _Pairs:
+    """The data every candidate pair is decided on.
+
+    Attributes:
+        X: (P, D) float32 unit descriptors (normalised in float64, zero rows stay zero).
+        raw: (P, D) the original descriptors (any numeric dtype), for float64 recomputation.
+        norm: (P,) float64 norms of ``raw``.
+        points: (P, 3) float64 world points, metres.
+    """
+
+    def __init__(self, descriptors: np.ndarray, points_world: np.ndarray, chunk: int = 65536):
+        self.raw = descriptors
+        self.points = np.asarray(points_world, dtype=np.float64)
+        P, D = descriptors.shape
+        self.X = np.empty((P, D), dtype=np.float32)
+        self.norm = np.empty(P, dtype=np.float64)
+        for s in range(0, P, chunk):
+            d = descriptors[s:s + chunk].astype(np.float64)
+            n = np.sqrt(np.einsum("ij,ij->i", d, d))
+            self.norm[s:s + chunk] = n
+            self.X[s:s + chunk] = d / np.maximum(n, 1e-300)[:, None]
+
+    def count(self, queries: np.ndarray, lims: np.ndarray, sims: np.ndarray, labels: np.ndarray,
+              cos_t: float, min_d2: float) -> np.ndarray:
+        """Exact look-alike counts of ``queries`` from their range-search candidates.
+
+        Args:
+            queries: (nq,) global row indices of the queries.
+            lims, sims, labels: a FAISS range-search result (candidates of query k are
+                ``labels[lims[k]:lims[k+1]]`` with float32 cosines ``sims[...]``).
+            cos_t: cosine threshold (strict); min_d2: squared minimum distance (strict).
+
+        Returns:
+            (nq,) int64 counts, and (nq,) bool: the query has a candidate other than itself.
+        """
+        nq = len(queries)
+        pos = np.repeat(np.arange(nq, dtype=np.int64), np.diff(lims).astype(np.int64))
+        qi = np.asarray(queries, dtype=np.int64)[pos]
+        j = labels.astype(np.int64, copy=False)
+        d2 = np.sum((self.points[qi] - self.points[j]) ** 2, axis=1)
+        other = j != qi
+        found = np.bincount(pos[other], minlength=nq) > 0
+        far = (d2 > min_d2) & other
+        pos, qi, j, s = pos[far], qi[far], j[far], sims[far]
+        ok = s > cos_t + _BAND
+        unsure = np.flatnonzero(~ok & (s > cos_t - _BAND))
+        if len(unsure):
+            a = self.raw[qi[unsure]].astype(np.float64)
+            b = self.raw[j[unsure]].astype(np.float64)
+            den = self.norm[qi[unsure]] * self.norm[j[unsure]]
+            ok[unsure] = np.einsum("ij,ij->i", a, b) > cos_t * den
+        return np.bincount(pos[ok], minlength=nq), found
 
 
 def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
@@ -90,7 +187,7 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     """n_p for every point: look-alikes (cos > threshold) farther than ``min_distance``.
 
     Args:
-        descriptors: (P, D) descriptors (e.g. OpenCV SIFT, D = 128, any positive scale).
+        descriptors: (P, D) descriptors (e.g. OpenCV SIFT, D = 128, uint8 or float, any scale).
         points_world: (P, 3) 3D points, world metres.
         config: settings; ``method`` picks the algorithm.
 
@@ -102,185 +199,158 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     _check(descriptors, points_world, config)
     method = config.method
     if method == "auto":
-        method = "exact" if len(descriptors) <= config.exact_max_points else "approx"
+        method = "exact" if len(descriptors) <= config.exact_max_points else "ivf"
     t0 = time.perf_counter()
-    if method == "exact":
-        out = count_similar_exact(descriptors, points_world, config)
-    else:
-        out = count_similar_approx(descriptors, points_world, config)
+    out = (count_similar_exact if method == "exact" else count_similar_ivf)(descriptors, points_world, config)
     log.info("similarity (%s): %d points, mean n_p %.2f, %.1f s", method, len(out),
              float(out.mean()) if len(out) else 0.0, time.perf_counter() - t0)
     return out
 
 
-def _count_block(X, Pw, q: np.ndarray, m: np.ndarray, cos_t: float, min_d2: float, counts: np.ndarray,
-                 qi: np.ndarray | None = None, mj: np.ndarray | None = None) -> None:
-    """Add to ``counts[q]`` the exact look-alikes of rows ``q`` among rows ``m`` of X.
+def _search(index, pairs: _Pairs, queries: np.ndarray, config: SimilarityConfig,
+            probes: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Range-search ``queries`` (global row indices) in batches and count their look-alikes exactly.
 
     Args:
-        X: (P, D) unit descriptors; Pw: (P, 3) points; q, m: global row indices.
-        qi, mj: optional candidate pairs (positions in q and m); only those are checked
-            (exactly, in the full dimension). Without them all pairs are checked by one GEMM.
+        index: a FAISS index holding ``pairs.X``.
+        queries: (Q,) row indices.
+        probes: for an IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid scores): the cells
+            each query searches (``index.range_search_preassigned``); None: ``index.range_search``.
+
+    Returns:
+        (Q,) int64 counts and (Q,) bool: whether the query had any candidate (a pair within the
+        cosine band, at any 3D distance, other than itself).
     """
-    if qi is None:
-        qi, mj = np.nonzero((X[q] @ X[m].T) > cos_t)
-        gq, gm = q[qi], m[mj]
-    else:
-        gq, gm = q[qi], m[mj]
-        keep = np.einsum("ij,ij->i", X[gq], X[gm]) > cos_t
-        gq, gm = gq[keep], gm[keep]
-    if len(gq) == 0:
-        return
-    d2 = np.sum((Pw[gq] - Pw[gm]) ** 2, axis=1)
-    ok = (d2 > min_d2) & (gq != gm)
-    np.add.at(counts, gq[ok], 1)
+    cos_t = float(config.cos_threshold)
+    min_d2 = float(config.min_distance) ** 2
+    radius = cos_t - _BAND
+    out = np.zeros(len(queries), dtype=np.int64)
+    found = np.zeros(len(queries), dtype=bool)
+    if probes is not None:
+        index.nprobe = probes[0].shape[1]
+    for s in range(0, len(queries), config.batch):
+        q = queries[s:s + config.batch]
+        contiguous = q[-1] - q[0] + 1 == len(q)
+        xq = pairs.X[q[0]:q[-1] + 1] if contiguous else pairs.X[q]
+        if probes is None:
+            lims, sims, labels = index.range_search(xq, radius)
+        else:
+            lims, sims, labels = index.range_search_preassigned(xq, radius, probes[0][s:s + len(q)],
+                                                                probes[1][s:s + len(q)])
+        out[s:s + len(q)], found[s:s + len(q)] = pairs.count(q, lims, sims, labels, cos_t, min_d2)
+    return out, found
 
 
 def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
-                        config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
-    """Exact n_p by blocked all-pairs dot products (O(P^2) time, O(block) memory).
+                        config: SimilarityConfig = SimilarityConfig(),
+                        queries: np.ndarray | None = None) -> np.ndarray:
+    """Exact n_p: ``IndexFlatIP`` range search over all points (O(P^2 D) time).
+
+    Args:
+        descriptors, points_world, config: as :func:`count_similar`.
+        queries: optional (Q,) row indices: count only these points (against all P points),
+            e.g. a sample to measure the error of :func:`count_similar_ivf` on a large input.
+
+    Returns:
+        (P,) int32 counts, or (Q,) for ``queries``; equal to float64 brute force.
+    """
+    descriptors = np.asarray(descriptors)
+    _check(descriptors, np.asarray(points_world), config)
+    pairs = _Pairs(descriptors, points_world)
+    q = np.arange(len(descriptors)) if queries is None else np.asarray(queries, dtype=np.int64)
+    with _faiss_threads(config.threads):
+        index = faiss.IndexFlatIP(descriptors.shape[1])
+        index.add(pairs.X)
+        out, _ = _search(index, pairs, q, config)
+    return out.astype(np.int32)
+
+
+def _nlist(P: int, config: SimilarityConfig) -> int:
+    n = config.nlist or int(np.clip(round(config.nlist_factor * np.sqrt(P)), 16, 65536))
+    return max(1, min(n, P))
+
+
+def _expand(index, quantizer, pairs: _Pairs, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
+            counts: np.ndarray, config: SimilarityConfig) -> None:
+    """Search ``queries`` in further cells by doubling rings of rank [n, 2 n), [2 n, 4 n), ...
+    (n = ``searched.shape[1]``) up to ``nprobe_max``, while a query's last ring held a candidate.
+
+    ``searched``: (Q, n) cells already searched; they are never searched again (even if the
+    quantizer ranks them differently now), so no pair is counted twice. Adds to ``counts``.
+    """
+    n = searched.shape[1]
+    scores, cells = quantizer.search(pairs.X[queries], nprobe_max)
+    row = np.arange(len(queries), dtype=np.int64)[:, None] * (index.nlist + 1)
+    cells[np.isin(cells + row, searched + row)] = -1  # FAISS skips cells numbered -1
+    active = np.arange(len(queries))
+    lo = n
+    while lo < nprobe_max and len(active):
+        hi = min(2 * lo, nprobe_max)
+        c, found = _search(index, pairs, queries[active], config,
+                           (np.ascontiguousarray(cells[active, lo:hi]), np.ascontiguousarray(scores[active, lo:hi])))
+        counts[queries[active]] += c
+        active = active[found]
+        lo = hi
+
+
+def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
+                      config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
+    """n_p by an ``IndexIVFFlat`` range search (see module docstring); never over-counts.
 
     Args and returns as :func:`count_similar`.
     """
-    X = _normalise(descriptors)
-    Pw = np.asarray(points_world, dtype=np.float64)
-    P = len(X)
-    counts = np.zeros(P, dtype=np.int64)
-    idx = np.arange(P)
-    rows = max(1, config.block // max(P, 1))
-    min_d2 = float(config.min_distance) ** 2
-    for s in range(0, P, rows):
-        _count_block(X, Pw, idx[s:s + rows], idx, config.cos_threshold, min_d2, counts)
-    return counts.astype(np.int32)
-
-
-def _kmeans(Y: np.ndarray, k: int, iters: int, rng: np.random.Generator) -> np.ndarray:
-    """Plain Lloyd k-means (k-means++-lite init: random distinct points). Returns (k, d) centroids."""
-    C = Y[rng.choice(len(Y), size=k, replace=False)].copy()
-    for _ in range(iters):
-        a = _nearest(Y, C, 1)[:, 0]
-        sums = np.zeros_like(C, dtype=np.float64)
-        np.add.at(sums, a, Y)
-        cnt = np.bincount(a, minlength=k)
-        empty = cnt == 0
-        C[~empty] = (sums[~empty] / cnt[~empty, None]).astype(np.float32)
-        if empty.any():  # re-seed empty cells at random points
-            C[empty] = Y[rng.choice(len(Y), size=int(empty.sum()), replace=False)]
-    return C
-
-
-def _nearest(Y: np.ndarray, C: np.ndarray, n: int, chunk: int = 65536) -> np.ndarray:
-    """(P, n) indices of the n nearest centroids of each row of Y (nearest first)."""
-    out = np.empty((len(Y), n), dtype=np.int64)
-    cc = np.sum(C * C, axis=1)
-    for s in range(0, len(Y), chunk):
-        d = cc[None] - 2.0 * (Y[s:s + chunk] @ C.T)
-        if n == 1:
-            out[s:s + chunk, 0] = np.argmin(d, axis=1)
-        else:
-            part = np.argpartition(d, n - 1, axis=1)[:, :n]
-            order = np.argsort(np.take_along_axis(d, part, axis=1), axis=1)
-            out[s:s + chunk] = np.take_along_axis(part, order, axis=1)
-    return out
-
-
-def count_similar_approx(descriptors: np.ndarray, points_world: np.ndarray,
-                         config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
-    """n_p by the inverted-file search (see module docstring); never over-counts.
-
-    Args and returns as :func:`count_similar`.
-    """
-    X = _normalise(descriptors)
-    Pw = np.asarray(points_world, dtype=np.float64)
-    P = len(X)
-    counts = np.zeros(P, dtype=np.int64)
+    descriptors = np.asarray(descriptors)
+    _check(descriptors, np.asarray(points_world), config)
+    P, D = descriptors.shape
     if P < 2:
-        return counts.astype(np.int32)
+        return np.zeros(P, dtype=np.int32)
+    pairs = _Pairs(descriptors, points_world)
+    nlist = _nlist(P, config)
+    nprobe = min(config.nprobe, nlist)
+    nprobe_max = max(nprobe, min(config.nprobe_max, nlist))
     rng = np.random.default_rng(config.seed)
-    sample = X if P <= config.kmeans_sample else X[np.sort(rng.choice(P, config.kmeans_sample, replace=False))]
-    mu = sample.mean(axis=0, dtype=np.float64)
-    d = min(config.pca_dims, X.shape[1])
-    cov = np.cov((sample - mu.astype(np.float32)).T.astype(np.float64))
-    _, V = np.linalg.eigh(cov)
-    B = np.ascontiguousarray(V[:, ::-1][:, :d], dtype=np.float32)  # (D, d) orthonormal columns
-    Y = (X - mu.astype(np.float32)) @ B
-    nprobe_req = max(1, config.nprobe)
-    K = config.num_cells or int(np.clip(np.sqrt(nprobe_req * P), 16, 8192))
-    K = min(K, len(sample))
-    C = _kmeans(Y if P <= config.kmeans_sample else (sample - mu.astype(np.float32)) @ B, K, config.kmeans_iters, rng)
-    thr = (2.0 - 2.0 * config.cos_threshold) * (1.0 + 1e-4) + 1e-6  # squared radius
-    r = float(np.sqrt(thr))
-    # k-means splits a dense blob of look-alikes into many cells; merge cells whose centroids lie
-    # within r of a leader (no chaining: a merged cell spans at most 2 r around its leader)
-    sub = _nearest(Y, C, 1)[:, 0]
-    size = np.bincount(sub, minlength=K)
-    cc = np.sum(C * C, axis=1)
-    merged = np.full(K, -1, dtype=np.int64)
-    leaders: list[int] = []
-    nsub = np.ones(K, dtype=np.int64)  # sub-cells per merged cell (indexed by merged id)
-    for k in np.argsort(-size, kind="stable"):
-        if size[k] == 0:
-            continue
-        if leaders:
-            L = np.asarray(leaders)
-            dl = cc[L] + cc[k] - 2.0 * (C[L] @ C[k])
-            dl[nsub[:len(L)] >= config.max_merge] = np.inf
-            j = int(np.argmin(dl))
-            if dl[j] < (config.merge_radius * r) ** 2:
-                merged[k] = j
-                nsub[j] += 1
-                continue
-        merged[k] = len(leaders)
-        leaders.append(int(k))
-    cell = merged[sub]
-    M = len(leaders)
-    order = np.argsort(cell, kind="stable")
-    starts = np.searchsorted(cell[order], np.arange(M + 1))
-    gid = order
-    X, Y, Pw = X[order], Y[order], Pw[order]
-    cell = cell[order]
-    sub = sub[order]
-    # per merged cell: radius around each sub-centroid, for the triangle-inequality bound
-    rad = np.zeros(K, dtype=np.float32)
-    np.maximum.at(rad, sub, np.linalg.norm(Y - C[sub], axis=1))
-    # ||a - b||^2 < thr  <=>  2 a.b - |a|^2 - |b|^2 > -thr: one GEMM with augmented rows
-    yy = np.sum(Y * Y, axis=1)
-    Yq_aug = np.hstack([2.0 * Y, -yy[:, None], -np.ones((P, 1), np.float32)])
-    Ym_aug = np.hstack([Y, np.ones((P, 1), np.float32), yy[:, None]])
-    min_d2 = float(config.min_distance) ** 2
-    local = np.zeros(P, dtype=np.int64)
-    used = size > 0
-    for c in range(M):
-        q0, q1 = starts[c], starts[c + 1]
-        subs = np.unique(sub[q0:q1])
-        # lower bound of partner distance per target sub-cell, over this cell's sub-cells
-        dcs = np.sqrt(np.maximum(cc[subs][:, None] + cc[None] - 2.0 * (C[subs] @ C.T), 0.0))
-        gap_sub = np.min(dcs - rad[subs][:, None], axis=0) - rad
-        gap_sub[~used] = np.inf
-        gap = np.full(M, np.inf)
-        np.minimum.at(gap, merged[used], gap_sub[used])
-        targets = np.flatnonzero(gap < r)
-        # at most nprobe merged cells, nearest first by the bound (the only approximation)
-        if len(targets) > nprobe_req:
-            targets = targets[np.argsort(gap[targets], kind="stable")[:nprobe_req]]
-        midx = np.concatenate([np.arange(starts[t], starts[t + 1]) for t in targets])
-        rows = max(1, config.block // len(midx))
-        Ym = Ym_aug[midx]
-        for s0 in range(q0, q1, rows):
-            qidx = np.arange(s0, min(q1, s0 + rows))
-            qi, mj = np.nonzero((Yq_aug[qidx] @ Ym.T) > -thr)
-            if len(qi) == 0:
-                continue
-            if len(qi) > 0.05 * len(qidx) * len(midx):  # dense: verify the block by GEMM
-                _count_block(X, Pw, qidx, midx, config.cos_threshold, min_d2, local)
-            else:
-                _count_block(X, Pw, qidx, midx, config.cos_threshold, min_d2, local, qi, mj)
-    counts[gid] = local
+    n_train = min(P, max(nlist, config.train_points_per_cell * nlist))
+    train = pairs.X if n_train == P else pairs.X[np.sort(rng.choice(P, n_train, replace=False))]
+    t0 = time.perf_counter()
+    with _faiss_threads(config.threads):
+        quantizer = faiss.IndexFlatIP(D)
+        index = faiss.IndexIVFFlat(quantizer, D, nlist, faiss.METRIC_INNER_PRODUCT)
+        index.cp.seed = int(config.seed)
+        index.cp.niter = int(config.train_iters)
+        index.cp.max_points_per_centroid = n_train  # the sample is ours: FAISS must not resample
+        index.cp.min_points_per_centroid = 1
+        index.train(train)
+        t1 = time.perf_counter()
+        # one quantizer pass: the nearest cell files the point, the nprobe nearest are searched
+        scores, cells = quantizer.search(pairs.X, nprobe)
+        first = np.ascontiguousarray(cells[:, 0])  # named: swig_ptr does not keep the array alive
+        index.add_core(P, faiss.swig_ptr(pairs.X), None, faiss.swig_ptr(first))
+        t2 = time.perf_counter()
+        counts = np.zeros(P, dtype=np.int64)
+        # every point searches its nprobe nearest cells, in two halves; a point whose farther
+        # half still held a candidate searches on (a dense group of look-alikes that k-means
+        # split over more than nprobe cells)
+        h = (nprobe + 1) // 2
+        everyone = np.arange(P)
+        c, _ = _search(index, pairs, everyone, config,
+                       (np.ascontiguousarray(cells[:, :h]), np.ascontiguousarray(scores[:, :h])))
+        counts += c
+        if nprobe > h:
+            c, found = _search(index, pairs, everyone, config,
+                               (np.ascontiguousarray(cells[:, h:]), np.ascontiguousarray(scores[:, h:])))
+            counts += c
+            go_on = everyone[found] if nprobe_max > nprobe else everyone[:0]
+            for s in range(0, len(go_on), config.batch):
+                _expand(index, quantizer, pairs, go_on[s:s + config.batch], cells[go_on[s:s + config.batch]],
+                        nprobe_max, counts, config)
+            log.debug("similarity ivf: %d of %d points searched beyond %d cells", len(go_on), P, nprobe)
+    log.debug("similarity ivf: %d points, %d cells, nprobe %d (max %d): train %.1f s, assign + add %.1f s, "
+              "search %.1f s", P, nlist, nprobe, nprobe_max, t1 - t0, t2 - t1, time.perf_counter() - t2)
     return counts.astype(np.int32)
 
 
 # ----------------------------------------------------------------------------------------------
-# measurement and benchmark
+# measurement
 
 
 def synthetic_descriptors(n_points: int, seed: int = 0, dup_fraction: float = 0.3,
@@ -320,49 +390,28 @@ def synthetic_descriptors(n_points: int, seed: int = 0, dup_fraction: float = 0.
     return D[perm].astype(np.float32), pts[perm]
 
 
-def measure_error(descriptors: np.ndarray, points_world: np.ndarray,
-                  config: SimilarityConfig = SimilarityConfig()) -> dict:
-    """Approximate vs exact counts on the same input.
+def measure_error(approx: np.ndarray, exact: np.ndarray) -> dict:
+    """Error of approximate counts against exact counts of the same points.
 
-    Returns a dict: ``points``, ``mean_abs_error`` (mean |n_approx - n_exact|), ``max_abs_error``,
-    ``recall`` (found / true look-alike pairs, i.e. sum n_approx / sum n_exact), ``exact_mean``
-    (mean n_exact), ``frac_points_exact`` (points whose count is exact), and both timings (s).
+    Args:
+        approx, exact: (Q,) counts of the same Q points.
+
+    Returns:
+        dict: ``points``; ``recall`` (found / true look-alike pairs = sum approx / sum exact, 1.0
+        when there are none); ``mean_abs_error`` and ``max_abs_error`` of the counts;
+        ``frac_points_exact`` (points whose count is exact); ``over_counts`` (points counted too
+        high: must be 0); ``exact_mean`` (mean exact count).
     """
-    t0 = time.perf_counter()
-    ex = count_similar_exact(descriptors, points_world, config)
-    t1 = time.perf_counter()
-    ap = count_similar_approx(descriptors, points_world, config)
-    t2 = time.perf_counter()
-    err = np.abs(ap.astype(np.int64) - ex)
-    total = int(ex.sum())
+    approx = np.asarray(approx, dtype=np.int64)
+    exact = np.asarray(exact, dtype=np.int64)
+    err = approx - exact
+    total = int(exact.sum())
     return {
-        "points": int(len(ex)),
-        "mean_abs_error": float(err.mean()),
-        "max_abs_error": int(err.max()) if len(err) else 0,
-        "recall": float(ap.sum() / total) if total else 1.0,
-        "over_counts": int(np.sum(ap > ex)),
-        "exact_mean": float(ex.mean()),
-        "frac_points_exact": float(np.mean(err == 0)),
-        "exact_seconds": t1 - t0,
-        "approx_seconds": t2 - t1,
+        "points": int(len(exact)),
+        "recall": float(approx.sum() / total) if total else 1.0,
+        "mean_abs_error": float(np.abs(err).mean()) if len(err) else 0.0,
+        "max_abs_error": int(np.abs(err).max()) if len(err) else 0,
+        "frac_points_exact": float(np.mean(err == 0)) if len(err) else 1.0,
+        "over_counts": int(np.sum(err > 0)),
+        "exact_mean": float(exact.mean()) if len(exact) else 0.0,
     }
-
-
-def benchmark_similarity(n_points: int = 200000, seed: int = 0,
-                         config: SimilarityConfig = SimilarityConfig(), check_points: int = 20000) -> dict:
-    """Time :func:`count_similar_approx` on ``n_points`` synthetic SIFT-like descriptors.
-
-    Also measures the approximation error on a ``check_points`` subset (exact is O(P^2)).
-    Returns a dict with ``n_points``, ``approx_seconds``, ``points_per_second``, ``mean_n_p`` and
-    the :func:`measure_error` figures of the subset under ``check_*`` keys.
-    """
-    D, pts = synthetic_descriptors(n_points, seed)
-    t0 = time.perf_counter()
-    ap = count_similar_approx(D, pts, config)
-    dt = time.perf_counter() - t0
-    out = {"n_points": int(n_points), "approx_seconds": dt, "points_per_second": n_points / max(dt, 1e-9),
-           "mean_n_p": float(ap.mean())}
-    if check_points:
-        Ds, ps = synthetic_descriptors(min(check_points, n_points), seed + 1)
-        out.update({f"check_{k}": v for k, v in measure_error(Ds, ps, config).items()})
-    return out
