@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from markerplace.testbed import evaluation as ev
+from markerplace.testbed import metrics
+from markerplace.testbed import poses as tposes
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
 from markerplace.report import tables
@@ -31,11 +32,11 @@ def test_recall_hand_made_errors_inclusive_and_failures_are_misses():
     r = np.array([1.0, 5.0, 5.01, 1.0, np.inf, np.nan])
     # (0.05, 5): hits are [0.01, 1] and [0.05, 5] (inclusive); 5.01 deg and 0.2 m miss;
     # the two failures count as misses and stay in the denominator.
-    assert ev.recall(t, r, 0.05, 5.0) == pytest.approx(2 / 6)
-    assert ev.recall(t, r, 0.01, 1.0) == pytest.approx(1 / 6)
-    assert ev.recall(t, r, 1.0, 30.0) == pytest.approx(4 / 6)
-    assert ev.recalls(t, r) == pytest.approx([1 / 6, 2 / 6, 3 / 6, 4 / 6])
-    assert np.isnan(ev.recall([], [], 0.05, 5.0))
+    assert metrics.recall(t, r, 0.05, 5.0) == pytest.approx(2 / 6)
+    assert metrics.recall(t, r, 0.01, 1.0) == pytest.approx(1 / 6)
+    assert metrics.recall(t, r, 1.0, 30.0) == pytest.approx(4 / 6)
+    assert metrics.recalls(t, r) == pytest.approx([1 / 6, 2 / 6, 3 / 6, 4 / 6])
+    assert np.isnan(metrics.recall([], [], 0.05, 5.0))
 
 
 def test_pose_errors_batch_translation_rotation_and_failure():
@@ -44,14 +45,14 @@ def test_pose_errors_batch_translation_rotation_and_failure():
     est[0, :3, 3] += [0.03, 0.04, 0.0]
     est[1] = world_from_cam_poses(true[1:2, :3, 3], [np.arctan2(true[1, 1, 2], true[1, 0, 2]) + np.radians(7)])[0]
     est[2] = np.nan
-    t, r = ev.pose_errors_batch(est, true)
+    t, r = metrics.pose_errors_batch(est, true)
     assert t[0] == pytest.approx(0.05) and r[0] == pytest.approx(0.0, abs=1e-5)
     assert t[1] == pytest.approx(0.0, abs=1e-9) and r[1] == pytest.approx(7.0)
     assert np.isinf(t[2]) and np.isinf(r[2])
 
 
 def test_threshold_labels():
-    assert [ev.threshold_label(t) for t in ev.THRESHOLDS] == ["1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg"]
+    assert [metrics.threshold_label(t) for t in metrics.THRESHOLDS] == ["1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg"]
 
 
 # --- test poses --------------------------------------------------------------------------------
@@ -59,26 +60,26 @@ def test_threshold_labels():
 def test_weights_follow_paper_formula_and_are_non_negative():
     rng = np.random.default_rng(3)
     scores = rng.normal(-20, 4, size=500)
-    w = ev.test_pose_weights(scores)
+    w = tposes.test_pose_weights(scores)
     assert np.allclose(w, 2 * scores.max() - scores.mean() - scores)
     assert (w >= 0).all()
     assert w[np.argmin(scores)] == w.max() and w[np.argmax(scores)] == pytest.approx(scores.max() - scores.mean())
     # constant scores -> zero weights -> uniform fallback
-    p = ev.sampling_probabilities(np.full(4, 2.0), "weighted")
+    p = tposes.sampling_probabilities(np.full(4, 2.0), "weighted")
     assert np.allclose(p, 0.25)
     with pytest.raises(UserError):
-        ev.sampling_probabilities(scores, "lowest")
+        tposes.sampling_probabilities(scores, "lowest")
 
 
 def test_weighted_sampling_prefers_low_scores():
     poses, _ = _feasible()
     scores = np.linspace(-30, 0, len(poses))  # pose i has score rising with i
     occ, origin, res = _open_grid()
-    free = ev.free_space_checker(occ, origin, res, 0.1)
-    w_cfg = ev.TestPoseConfig(num=2000, mode="weighted", seed=1)
-    u_cfg = ev.TestPoseConfig(num=2000, mode="uniform", seed=1)
-    w = ev.sample_test_poses(poses, scores, 0.5, w_cfg, free)
-    u = ev.sample_test_poses(poses, scores, 0.5, u_cfg, free)
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
+    w_cfg = tposes.TestPoseConfig(num=2000, mode="weighted", seed=1)
+    u_cfg = tposes.TestPoseConfig(num=2000, mode="uniform", seed=1)
+    w = tposes.sample_test_poses(poses, scores, 0.5, w_cfg, free)
+    u = tposes.sample_test_poses(poses, scores, 0.5, u_cfg, free)
     low = scores < np.median(scores)
     frac_w = low[w.source_index].mean()
     frac_u = low[u.source_index].mean()
@@ -91,9 +92,9 @@ def test_perturbation_bounds_and_free_space():
     poses, yaws = _feasible()
     occ, origin, res = _open_grid()
     occ[:, :40] = 1  # wall: x < 2.0 m is occupied
-    free = ev.free_space_checker(occ, origin, res, 0.1)
-    cfg = ev.TestPoseConfig(num=300, mode="uniform", seed=7)
-    tp = ev.sample_test_poses(poses, np.zeros(len(poses)), 0.5, cfg, free)
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
+    cfg = tposes.TestPoseConfig(num=300, mode="uniform", seed=7)
+    tp = tposes.sample_test_poses(poses, np.zeros(len(poses)), 0.5, cfg, free)
     assert len(tp) == 300
     src = poses[tp.source_index]
     d = tp.world_from_cam[:, :3, 3] - src[:, :3, 3]
@@ -114,15 +115,15 @@ def test_same_seed_same_poses_and_round_trip(tmp_path):
     poses, _ = _feasible()
     scores = np.random.default_rng(0).normal(size=len(poses))
     occ, origin, res = _open_grid()
-    free = ev.free_space_checker(occ, origin, res, 0.1)
-    cfg = ev.TestPoseConfig(num=50, seed=11)
-    a = ev.sample_test_poses(poses, scores, 0.5, cfg, free)
-    b = ev.sample_test_poses(poses, scores, 0.5, cfg, free)
-    c = ev.sample_test_poses(poses, scores, 0.5, ev.TestPoseConfig(num=50, seed=12), free)
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
+    cfg = tposes.TestPoseConfig(num=50, seed=11)
+    a = tposes.sample_test_poses(poses, scores, 0.5, cfg, free)
+    b = tposes.sample_test_poses(poses, scores, 0.5, cfg, free)
+    c = tposes.sample_test_poses(poses, scores, 0.5, tposes.TestPoseConfig(num=50, seed=12), free)
     assert np.array_equal(a.world_from_cam, b.world_from_cam)
     assert not np.array_equal(a.world_from_cam, c.world_from_cam)
     a.save(tmp_path / "t.npz")
-    loaded = ev.TestPoses.load(tmp_path / "t.npz")
+    loaded = tposes.TestPoses.load(tmp_path / "t.npz")
     assert np.array_equal(loaded.world_from_cam, a.world_from_cam) and np.array_equal(loaded.source_index, a.source_index)
 
 
@@ -130,9 +131,9 @@ def test_no_free_space_is_a_user_error():
     poses, _ = _feasible(n_side=2)
     occ, origin, res = _open_grid()
     occ[:] = 1
-    free = ev.free_space_checker(occ, origin, res, 0.1)
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
     with pytest.raises(UserError, match="free space"):
-        ev.sample_test_poses(poses, np.zeros(len(poses)), 0.5, ev.TestPoseConfig(num=5, max_rounds=3), free)
+        tposes.sample_test_poses(poses, np.zeros(len(poses)), 0.5, tposes.TestPoseConfig(num=5, max_rounds=3), free)
 
 
 # --- tables ------------------------------------------------------------------------------------

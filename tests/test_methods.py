@@ -29,7 +29,8 @@ from markerplace.plan.placement import (
     random_placement,
     uniform_placement,
 )
-from markerplace.testbed import evaluation as ev
+from markerplace.testbed import placements
+from markerplace.testbed import config as tbconfig
 
 
 def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> planner.PlanData:
@@ -172,15 +173,15 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
     args = build_parser().parse_args(["evaluate", "tiny", "--out", "unused", "--methods", "none,omp,toy,toyrand",
                                       "--k", "2,3", "--runs", "2"])
     ecfg = evaluate_config_from_args(args)
-    ev.validate_evaluate_config(ecfg)
-    assert ev.method_names() == ("none", "omp", "random", "uniform", "toy", "toyrand")
-    assert ev.baseline_methods() == ("random", "uniform", "toyrand")
-    assert ev.EvaluateConfig().methods == ev.method_names()
-    runs = ev.build_placements(data, config.placement, ecfg)
+    tbconfig.validate_evaluate_config(ecfg)
+    assert placements.method_names() == ("none", "omp", "random", "uniform", "toy", "toyrand")
+    assert placements.baseline_methods() == ("random", "uniform", "toyrand")
+    assert tbconfig.EvaluateConfig().study.methods == placements.method_names()
+    runs = placements.build_placements(data, config.placement, ecfg)
     assert [(r.method, r.run, r.k) for r in runs] == [
         ("none", 0, 0), ("omp", 0, 2), ("omp", 0, 3), ("toy", 0, 2), ("toy", 0, 3),
         ("toyrand", 0, 2), ("toyrand", 0, 3), ("toyrand", 1, 2), ("toyrand", 1, 3)]
-    assert ev.marker_set_count(ecfg) == 2 + 2 + 2 * 2
+    assert placements.marker_set_count(ecfg) == 2 + 2 + 2 * 2
     toy3 = next(r for r in runs if r.method == "toy" and r.k == 3)
     assert [m.tag_id for m in toy3.markers] == [0, 1, 2]
     assert display_name("toy") == "Toy" and display_name("toyrand") == "toyrand"
@@ -192,7 +193,7 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
 
 def test_unknown_evaluate_method_lists_the_registry(toy_methods):
     with pytest.raises(UserError) as err:
-        ev.validate_evaluate_config(replace(ev.EvaluateConfig(), methods=("none", "best")))
+        tbconfig.validate_evaluate_config(tbconfig.EvaluateConfig(study=tbconfig.StudyConfig(methods=("none", "best"))))
     assert "use a comma list of none, omp, random, uniform, toy, toyrand" in str(err.value)
 
 
@@ -200,7 +201,7 @@ def test_build_placements_order_and_seeds_are_unchanged():
     """none, omp once at max k (prefixes), then random and uniform per (run, k) with seed + run."""
     data = _data(5)
     pc = planner.PlacementConfig(seed=4)
-    runs = ev.build_placements(data, pc, ev.EvaluateConfig(ks=(2, 4), runs=2))
+    runs = placements.build_placements(data, pc, tbconfig.EvaluateConfig(study=tbconfig.StudyConfig(ks=(2, 4), runs=2)))
     assert [(r.method, r.run, r.k) for r in runs] == [("none", 0, 0), ("omp", 0, 2), ("omp", 0, 4)] + [
         (m, run, k) for m in ("random", "uniform") for run in range(2) for k in (2, 4)]
     omp = planner.place(data, replace(pc, k=4, method="omp"), progress=False)

@@ -13,7 +13,9 @@ from markerplace.imaging.visibility import marker_points, markers_in_view
 from markerplace.markers import Marker
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
-from markerplace.testbed import evaluation as ev
+from markerplace.testbed import placements
+from markerplace.testbed import poses as tposes
+from markerplace.testbed import config as tbconfig
 from markerplace.testbed.images import TestbedImaging
 
 
@@ -117,28 +119,32 @@ def test_render_reuse_identical_without_marker_in_view():
 
 def test_shift_and_scale_markers():
     ms = [Marker(i, 0.4, world_from_marker_pose(np.array([1.0 + i, 0.0, 1.5]), np.array([0, 1.0, 0]))) for i in range(4)]
-    shifted = ev.shift_markers(ms, 0.25, seed=3)
+    shifted = placements.shift_markers(ms, 0.25, seed=3)
     d = np.array([s.position - m.position for s, m in zip(shifted, ms)])
     assert np.allclose(np.abs(d[:, 0]), 0.25) and np.allclose(d[:, 1:], 0)
     assert np.all(np.sign(d[1:, 0]) == -np.sign(d[:-1, 0]))  # alternating
     assert np.allclose([s.world_from_marker[:3, :3] for s in shifted], [m.world_from_marker[:3, :3] for m in ms])
-    again = ev.shift_markers(ms, 0.25, seed=3)
+    again = placements.shift_markers(ms, 0.25, seed=3)
     assert np.allclose([a.position for a in again], [s.position for s in shifted])
-    scaled = ev.scale_markers(ms, 1.5)
+    scaled = placements.scale_markers(ms, 1.5)
     assert all(s.size == pytest.approx(0.6) and np.allclose(s.position, m.position) for s, m in zip(scaled, ms))
 
 
-@pytest.mark.parametrize("field, value, message", [
-    ("tag_scale", 0.0, "--tag-scale"), ("shift", -1.0, "--shift"), ("methods", ("omp", "best"), "--methods"),
-    ("test_sets", ("hard",), "--test-sets"), ("ks", (0,), "--k"), ("runs", 0, "--runs"), ("tests", 0, "--tests"),
+@pytest.mark.parametrize("part, field, value, message", [
+    ("study", "tag_scale", 0.0, "--tag-scale"), ("study", "shift", -1.0, "--shift"),
+    ("study", "methods", ("omp", "best"), "--methods"), ("test", "sets", ("hard",), "--test-sets"),
+    ("study", "ks", (0,), "--k"), ("study", "runs", 0, "--runs"), ("test", "tests", 0, "--tests"),
+    ("localization", "localizer", "orb", "--localizer"),
 ])
-def test_bad_evaluate_settings_are_user_errors(field, value, message):
+def test_bad_evaluate_settings_are_user_errors(part, field, value, message):
     from dataclasses import replace
 
     from markerplace.errors import UserError
 
+    base = tbconfig.EvaluateConfig()
+    config = replace(base, **{part: replace(getattr(base, part), **{field: value})})
     with pytest.raises(UserError, match=message):
-        ev.validate_evaluate_config(replace(ev.EvaluateConfig(), **{field: value}))
+        tbconfig.validate_evaluate_config(config)
 
 
 def test_find_placement_files(tmp_path):
@@ -146,7 +152,7 @@ def test_find_placement_files(tmp_path):
     (tmp_path / "expert" / "placement.json").write_text(json.dumps({"markers": []}))
     (tmp_path / "human.json").write_text("[]")
     (tmp_path / "expert" / "config.json").write_text("{}")
-    found = ev.find_placement_files(tmp_path)
+    found = placements.find_placement_files(tmp_path)
     assert sorted(found) == ["expert", "human"]
 
 
@@ -183,13 +189,13 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     errs = np.load(out / "query_errors.npz")
     assert errs["weighted_t_err"].shape == (4, 20) and errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform"]
     # same test poses for every method: one file per test set, identical on a re-run
-    poses = ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
+    poses = tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
     results = sorted((out / "cache" / "predictions").glob("*.npz"))
     assert len(results) == 8
     stamps = [p.stat().st_mtime_ns for p in results]
     assert main(args) == 0  # resume: every placement's predictions are reused
     assert [p.stat().st_mtime_ns for p in results] == stamps
-    assert np.array_equal(ev.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam, poses)
+    assert np.array_equal(tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam, poses)
     assert list(csv.DictReader((out / "recall.csv").open())) == rows
 
 

@@ -143,13 +143,13 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     core_seconds = poses * SECONDS_PER_POSE_CORE
     queries = 0
     if evaluate_config is not None:
-        from .testbed.evaluation import NO_MARKERS, marker_set_count
+        from .testbed.placements import NO_MARKERS, marker_set_count
 
         with_markers = marker_set_count(evaluate_config) + extra_placements
-        placements = with_markers + (1 if NO_MARKERS in evaluate_config.methods else 0)
-        queries = evaluate_config.tests * len(evaluate_config.test_sets) * placements
+        placements = with_markers + (1 if NO_MARKERS in evaluate_config.study.methods else 0)
+        queries = evaluate_config.test.tests * len(evaluate_config.test.sets) * placements
         core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
-            + evaluate_config.tests * len(evaluate_config.test_sets) * SECONDS_PER_POSE_CORE
+            + evaluate_config.test.tests * len(evaluate_config.test.sets) * SECONDS_PER_POSE_CORE
     return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys)
 
 

@@ -212,20 +212,21 @@ def check_plan_config(config) -> None:
 
 
 def check_evaluate_config(config) -> None:
-    """Numeric settings of an :class:`~markerplace.testbed.evaluation.EvaluateConfig`."""
-    TESTS.check(config.tests)
-    RUNS.check(config.runs)
-    if not config.ks:
+    """Numeric settings of an :class:`~markerplace.testbed.config.EvaluateConfig`."""
+    test, study = config.test, config.study
+    TESTS.check(test.tests)
+    RUNS.check(study.runs)
+    if not study.ks:
         raise UserError("--k is empty: give positive marker counts, e.g. 5,10,15,20")
-    for k in config.ks:
+    for k in study.ks:
         EVAL_K.check(k)
-    TAG_SCALE.check(config.tag_scale)
-    SHIFT.check(config.shift)
+    TAG_SCALE.check(study.tag_scale)
+    SHIFT.check(study.shift)
     SEED.check(config.seed)
-    if config.test_seed is not None:
-        TEST_SEED.check(config.test_seed)
-    if config.vlad_clusters < 2:
-        raise UserError(f"VLAD clusters {config.vlad_clusters} must be at least 2")
+    if test.seed is not None:
+        TEST_SEED.check(test.seed)
+    if config.localization.vlad_clusters < 2:
+        raise UserError(f"VLAD clusters {config.localization.vlad_clusters} must be at least 2")
 
 
 def check_pose_in_scene(scene, position, offset=(0.0, 0.0, 0.0), margin: float = 0.0) -> None:

@@ -25,21 +25,16 @@ def _name_list(text: str) -> tuple[str, ...]:
 
 
 def evaluate_config_from_args(args: argparse.Namespace):
-    """Build an :class:`~markerplace.testbed.evaluation.EvaluateConfig` from parsed ``evaluate`` arguments."""
-    from ..testbed.evaluation import EvaluateConfig
+    """Build an :class:`~markerplace.testbed.config.EvaluateConfig` from parsed ``evaluate`` arguments."""
+    from ..testbed.config import EvaluateConfig, LocalizationConfig, StudyConfig, TestSetConfig
 
     return EvaluateConfig(
-        tests=args.tests,
-        test_sets=_name_list(args.test_sets),
-        methods=_name_list(args.methods),
-        runs=args.runs,
-        ks=_int_list(args.k, "--k"),
-        use_tags=not args.no_tags,
-        tag_corners=args.tag_corners,
-        tag_scale=args.tag_scale,
-        shift=args.shift,
+        test=TestSetConfig(tests=args.tests, sets=_name_list(args.test_sets), seed=args.test_seed),
+        study=StudyConfig(methods=_name_list(args.methods), runs=args.runs, ks=_int_list(args.k, "--k"),
+                          tag_scale=args.tag_scale, shift=args.shift),
+        localization=LocalizationConfig(localizer=args.localizer, use_tags=not args.no_tags,
+                                        tag_corners=args.tag_corners),
         seed=args.seed,
-        test_seed=args.test_seed,
     )
 
 
@@ -48,7 +43,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from .options import plan_config_from_args, plan_inputs_in_scene_frame
-    from ..testbed.evaluation import find_placement_files, method_names, validate_evaluate_config
+    from ..testbed.config import validate_evaluate_config
+    from ..testbed.placements import find_placement_files, method_names
     from ..markers import load_markers
     from ..scene.spec import SceneSpec
     from ..plan.planner import validate
@@ -57,10 +53,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
-    if not config.methods and not args.placements:
+    if not config.study.methods and not args.placements:
         raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
     plan_config = plan_config_from_args(args)
-    plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.ks)))
+    plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.study.ks)))
     validate(plan_config)
     # every input file is read before any work: a bad --placements fails in a second, not after the plan
     placement_files = find_placement_files(args.placements) if args.placements else {}
@@ -79,7 +75,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
     from ..plan.methods import PLACEMENT_METHODS
-    from ..testbed.evaluation import baseline_methods, method_names
+    from ..localization.localizer import LOCALIZERS
+    from ..testbed.placements import baseline_methods, method_names
     from .options import add_plan_args, add_scene_args
 
     methods = ", ".join(f"{name} = {cls.label or name}" for name, cls in PLACEMENT_METHODS.items())
@@ -106,6 +103,8 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                         "set without changing a built-in scene")
     p.add_argument("--placements", default=None,
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
+    p.add_argument("--localizer", default="sift_pnp", choices=LOCALIZERS.names(),
+                   help=f"localizer of the test images: {LOCALIZERS.help()} (default sift_pnp)")
     g = p.add_argument_group("study switches")
     g.add_argument("--no-tags", action="store_true", help="localize without tag detection")
     g.add_argument("--tag-corners", action="store_true", help="also use detected tag corners as 2D-3D matches")

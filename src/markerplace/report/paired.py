@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..testbed.evaluation import NO_MARKERS, baseline_methods
+from ..testbed.placements import NO_MARKERS, baseline_methods
 from .tables import display_name
 
 
@@ -71,7 +71,7 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
         hits: (method, run, k) -> (n,) bool, the test images localized within the threshold;
             all arrays index the same test images. Candidates are the methods other than
             ``none`` and the baselines (the randomized placement methods,
-            :func:`~markerplace.testbed.evaluation.baseline_methods`).
+            :func:`~markerplace.testbed.placements.baseline_methods`).
         ks: marker budgets to compare.
         n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 

@@ -2,7 +2,7 @@
 
 A *recall row* is a dict with the ``recall.csv`` columns :data:`CSV_COLUMNS`:
 ``scene, method, run, k, test_set, threshold, recall, n_tests`` where ``threshold`` is a label
-such as ``5cm/5deg`` (see :func:`markerplace.testbed.evaluation.threshold_label`), ``recall`` is a
+such as ``5cm/5deg`` (see :func:`markerplace.testbed.metrics.threshold_label`), ``recall`` is a
 fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``.
 
 Markdown tables print recall in percent. Methods are listed in registry order
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..io_utils import atomic_path
 from ..plan.methods import PLACEMENT_METHODS
-from ..testbed.evaluation import NO_MARKERS
+from ..testbed.placements import NO_MARKERS
 
 CSV_COLUMNS = ("scene", "method", "run", "k", "test_set", "threshold", "recall", "n_tests")
 

@@ -53,29 +53,29 @@ class EvaluationResult:
     timings: dict
 
 
-def _localizer_config(config):
-    from ..localization.localizer import LocalizerConfig
-
-    return LocalizerConfig(use_tags=config.use_tags, tag_corners=config.tag_corners, seed=config.seed)
+def _localizer_spec(config) -> tuple:
+    """(registered localizer name, its settings) of the run (hashable: part of cache keys)."""
+    loc = config.localization
+    return loc.localizer, (("use_tags", loc.use_tags), ("tag_corners", loc.tag_corners), ("seed", config.seed))
 
 
 def _test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
-    from . import evaluation as ev
+    from . import poses as tp
 
     disc = data.disc
     map_poses = np.asarray(disc.world_from_cam, float)
     layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
-    is_free = ev.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.min_clearance,
+    is_free = tp.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.test.min_clearance,
                                     np.array([layer[int(st)] for st in disc.pose_storey], dtype=np.int64))
     poses = {}
-    for ts in config.test_sets:  # a test set's seed does not depend on which other sets run
-        tcfg = ev.TestPoseConfig(num=config.tests, mode=ts, seed=config.pose_seed + 1000 * ev.TEST_SETS.index(ts),
-                                 min_clearance=config.min_clearance)
+    for ts in config.test.sets:  # a test set's seed does not depend on which other sets run
+        tcfg = tp.TestPoseConfig(num=config.test.tests, mode=ts, seed=config.pose_seed + 1000 * tp.TEST_SETS.index(ts),
+                                 min_clearance=config.test.min_clearance)
         key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing)
         poses[ts] = cached("test_poses", out / f"test_poses_{ts}.npz", key,
-                           lambda: ev.sample_test_poses(map_poses, data.base_score, plan_config.discretize.grid_spacing,
+                           lambda: tp.sample_test_poses(map_poses, data.base_score, plan_config.discretize.grid_spacing,
                                                         tcfg, is_free),
-                           lambda tp, path: tp.save(path), ev.TestPoses.load, timings)
+                           lambda t, path: t.save(path), tp.TestPoses.load, timings)
     return poses
 
 
@@ -84,7 +84,7 @@ def _codebook(path: Path, key: str, map_base: BaseImages, config, timings: dict)
 
     return cached("vlad_codebook", path, key,
                   lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
-                                             num_clusters=config.vlad_clusters, seed=config.seed),
+                                             num_clusters=config.localization.vlad_clusters, seed=config.seed),
                   lambda cb, p: cb.save(p), VladCodebook.load, timings)
 
 
@@ -96,7 +96,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         scene_spec: :class:`~markerplace.scene.spec.SceneSpec` of the scene.
         plan_config: :class:`~markerplace.plan.planner.PlanConfig` (discretization, scoring,
             v, runtime: where the per-image work runs).
-        config: :class:`~markerplace.testbed.evaluation.EvaluateConfig`.
+        config: :class:`~markerplace.testbed.config.EvaluateConfig`.
         out_dir: run directory: planner artifacts (``plan/``), caches (``cache/``: marker-free
             features, codebook, ``predictions/``) and the outputs ``recall.csv``,
             ``query_errors.npz``, ``tables.md``, ``recall_vs_k.png``, ``timings.json``,
@@ -110,18 +110,19 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     from ..io_utils import write_json
     from ..markers import load_markers
     from ..plan.planner import prepare, validate
-    from . import evaluation as ev
+    from .config import validate_evaluate_config
+    from .placements import build_placements, find_placement_files
     from .report import write_outputs
 
     t_all = time.perf_counter()
-    ev.validate_evaluate_config(config)
+    validate_evaluate_config(config)
     validate(plan_config)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cache_dir = out / "cache"
     timings: dict[str, float] = {}
     imaging = imaging_config or replace(plan_config.imaging, sift=SIFT_DEFAULT)
-    lcfg = _localizer_config(config)
+    lcfg = _localizer_spec(config)
 
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
@@ -138,8 +139,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
 
             # placement files are in the user's (file) frame; the scene may be recentred
             extra = {name: markers_to_internal(load_markers(p), world_offset(scene))
-                     for name, p in ev.find_placement_files(placements_dir).items()}
-        placements = ev.build_placements(data, plan_config.placement, config, extra)
+                     for name, p in find_placement_files(placements_dir).items()}
+        placements = build_placements(data, plan_config.placement, config, extra)
         timings["placements"] = time.perf_counter() - t0
         log.info("evaluating %d marker sets: %s", len(placements), ", ".join(sorted({p.method for p in placements})))
 
@@ -149,12 +150,12 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         t0 = time.perf_counter()
         map_base = BaseImages(tb, map_poses, cache_dir / "map_base", base_key, True, "map")
         timings["map_no_markers"] = time.perf_counter() - t0
-        cb_key = cache.hash_of("vlad-v1", base_key, imaging, config.vlad_clusters, config.seed)
+        cb_key = cache.hash_of("vlad-v1", base_key, imaging, config.localization.vlad_clusters, config.seed)
         codebook = _codebook(cache_dir / "vlad_codebook.npz", cb_key, map_base, config, timings)
         t0 = time.perf_counter()
         query_base = {ts: BaseImages(tb, test_poses[ts].world_from_cam, cache_dir / f"query_base_{ts}",
                                      cache.hash_of(base_key, test_poses[ts].world_from_cam), False, f"queries {ts}")
-                      for ts in config.test_sets}
+                      for ts in config.test.sets}
         timings["queries_no_markers"] = time.perf_counter() - t0
 
         predictions = _predict_all(tb, placements, map_base, query_base, test_poses, codebook, cb_key, lcfg,

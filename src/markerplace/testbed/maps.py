@@ -65,16 +65,16 @@ def localize_features(localizer, feats: ImageFeatures):
 
 
 def localize_task(engine: ImagingEngine, item) -> np.ndarray:
-    """(db folder, localizer config, features | None, world_from_cam, markers) -> (4, 4)
-    estimate, all NaN on failure. With features None the query is first rendered here with
-    ``markers`` (its view holds some of them)."""
-    from ..localization.localizer import Localizer
+    """(db folder, (localizer name, settings), features | None, world_from_cam, markers) ->
+    (4, 4) estimate, all NaN on failure. With features None the query is first rendered here
+    with ``markers`` (its view holds some of them)."""
+    from ..localization.localizer import get_localizer
 
-    folder, localizer_config, feats, world_from_cam, markers = item
-    if engine.cache.get("db_folder") != (folder, localizer_config):
+    folder, (name, settings), feats, world_from_cam, markers = item
+    if engine.cache.get("db_folder") != (folder, name, settings):
         engine.cache.pop("localizer", None)
-        engine.cache["localizer"] = Localizer(load_map_database(folder), engine.K, localizer_config)
-        engine.cache["db_folder"] = (folder, localizer_config)
+        engine.cache["localizer"] = get_localizer(name, load_map_database(folder), engine.K, **dict(settings))
+        engine.cache["db_folder"] = (folder, name, settings)
     if feats is None:
         feats = engine.features(engine.render(world_from_cam, markers), tags=True)
     res = localize_features(engine.cache["localizer"], feats)

@@ -24,10 +24,10 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     Args:
         out: the run folder.
         scene_name: scene label of the tables.
-        placements: the evaluated :class:`~markerplace.testbed.evaluation.PlacementRun` list.
+        placements: the evaluated :class:`~markerplace.testbed.placements.PlacementRun` list.
         predictions: ``(method, run, k, test set) -> (N, 4, 4)`` estimated ``world_from_cam``
             per test image (all NaN where localization failed).
-        test_poses: test set -> :class:`~markerplace.testbed.evaluation.TestPoses` (truth).
+        test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
         config, plan_config: the evaluate and plan settings.
 
@@ -39,19 +39,19 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     from ..report.paired import paired_markdown
     from ..report.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
     from ..runtime.cache import config_dict
-    from . import evaluation as ev
+    from . import metrics
 
-    results = {key: ev.pose_errors_batch(est, test_poses[key[3]].world_from_cam) for key, est in predictions.items()}
-    labels = [ev.threshold_label(t) for t in config.thresholds]
+    results = {key: metrics.pose_errors_batch(est, test_poses[key[3]].world_from_cam) for key, est in predictions.items()}
+    labels = [metrics.threshold_label(t) for t in config.thresholds]
     rows = []
     arrays: dict[str, np.ndarray] = {}
-    for ts in config.test_sets:
+    for ts in config.test.sets:
         keys = [(p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, ts) in results]
         for method, run, k in keys:
             t_err, r_err = results[(method, run, k, ts)]
             for label, (tm, rm) in zip(labels, config.thresholds):
                 rows.append(dict(scene=scene_name, method=method, run=run, k=k, test_set=ts, threshold=label,
-                                 recall=ev.recall(t_err, r_err, tm, rm), n_tests=len(t_err)))
+                                 recall=metrics.recall(t_err, r_err, tm, rm), n_tests=len(t_err)))
         arrays[f"{ts}_method"] = np.array([k[0] for k in keys], dtype=str)
         arrays[f"{ts}_run"] = np.array([k[1] for k in keys], dtype=np.int64)
         arrays[f"{ts}_k"] = np.array([k[2] for k in keys], dtype=np.int64)
@@ -61,17 +61,17 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         arrays[f"{ts}_score"] = np.asarray(base_score)[test_poses[ts].source_index]
     write_recall_csv(out / "recall.csv", rows)
     write_npz(out / "query_errors.npz", **arrays)
-    main = ev.threshold_label(ev.MAIN_THRESHOLD) if ev.MAIN_THRESHOLD in config.thresholds else labels[0]
-    ks = sorted(set(config.ks))
+    main = metrics.threshold_label(metrics.MAIN_THRESHOLD) if metrics.MAIN_THRESHOLD in config.thresholds else labels[0]
+    ks = sorted(set(config.study.ks))
     md = tables_markdown(rows, ks, main, labels)
     summary = main_tables_markdown(rows, ks, main).strip()
-    t_main, r_main = next(t for t in config.thresholds if ev.threshold_label(t) == main)
-    hits = {ts: {(m, run, k): ev.hit_mask(*res, t_main, r_main)
-                 for (m, run, k, t), res in results.items() if t == ts} for ts in config.test_sets}
+    t_main, r_main = next(t for t in config.thresholds if metrics.threshold_label(t) == main)
+    hits = {ts: {(m, run, k): metrics.hit_mask(*res, t_main, r_main)
+                 for (m, run, k, t), res in results.items() if t == ts} for ts in config.test.sets}
     md += paired_markdown(hits, ks, main, seed=config.seed)
     with atomic_path(out / "tables.md") as tmp:
         tmp.write_text(md)
-    ts0 = config.test_sets[0]
+    ts0 = config.test.sets[0]
     curves = recall_curves(rows, scene_name, ts0, main, ks)
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")

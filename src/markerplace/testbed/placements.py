@@ -1,0 +1,161 @@
+"""The marker sets an evaluation compares: no markers, every placement method (OMP once with
+the largest k and its prefixes, randomized methods once per run and k), and placement files
+given with ``--placements``; printed at a scaled size or shifted along their walls for the
+sensitivity studies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import UserError
+from ..plan.methods import PLACEMENT_METHODS
+
+#: ``--methods`` name of the marker set without markers; every other name is a placement method
+#: of :data:`~markerplace.plan.methods.PLACEMENT_METHODS`.
+NO_MARKERS = "none"
+
+
+def method_names() -> tuple[str, ...]:
+    """Every name ``--methods`` accepts: ``none``, then the registered placement methods."""
+    return (NO_MARKERS, *PLACEMENT_METHODS)
+
+
+def baseline_methods() -> tuple[str, ...]:
+    """The randomized placement methods (``random``, ``uniform``): placed ``--runs`` times each
+    and the baselines of the paired comparisons."""
+    return tuple(name for name, cls in PLACEMENT_METHODS.items() if cls.randomized)
+
+
+def marker_set_count(config) -> int:
+    """Marker sets with markers that :func:`build_placements` evaluates without ``--placements``
+    files: per method, one per k, times ``runs`` for randomized methods (every entry of
+    ``config.study.ks`` counts: an upper bound when ks repeat)."""
+    ks = len(config.study.ks)
+    return sum(ks * (config.study.runs if PLACEMENT_METHODS[m].randomized else 1)
+               for m in config.study.methods if m in PLACEMENT_METHODS)
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementRun:
+    """One evaluated marker set.
+
+    Attributes:
+        method: ``none``, a placement method's name or an extra (``--placements``) name.
+        run: run index (0 for deterministic methods).
+        k: number of markers (0 for ``none``).
+        markers: the markers as drawn in the scene (after tag scale and shift).
+    """
+
+    method: str
+    run: int
+    k: int
+    markers: tuple
+
+
+def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
+    """Move marker i along its wall (marker x axis) by ``s_i * shift`` metres, ``s_i = s0 (-1)^i``
+    with a seeded random first sign ``s0``; orientation unchanged."""
+    from ..markers import Marker
+
+    if shift == 0.0 or not markers:
+        return list(markers)
+    s0 = 1.0 if np.random.default_rng(seed).random() < 0.5 else -1.0
+    out = []
+    for i, m in enumerate(markers):
+        T = np.array(m.world_from_marker, dtype=float)
+        T[:3, 3] += s0 * (-1.0) ** i * shift * T[:3, 0]
+        out.append(Marker(m.tag_id, m.size, T, m.family))
+    return out
+
+
+def scale_markers(markers: Sequence, scale: float) -> list:
+    """Markers printed ``scale`` times their planned size (same centre and orientation)."""
+    from ..markers import Marker
+
+    if scale == 1.0:
+        return list(markers)
+    return [Marker(m.tag_id, m.size * scale, np.array(m.world_from_marker, float), m.family) for m in markers]
+
+
+def build_placements(data, placement_config, config,
+                     extra: dict[str, Sequence] | None = None) -> list[PlacementRun]:
+    """Every marker set to evaluate, in processing order.
+
+    Args:
+        data: the planner's :class:`~markerplace.plan.planner.PlanData` (one ``prepare``).
+        placement_config: the planner's :class:`~markerplace.plan.planner.PlacementConfig` (v,
+            marker model, tag size, similarity, placement seed).
+        config: the :class:`~markerplace.testbed.config.EvaluateConfig` (its study: methods,
+            runs, ks, tag scale, shift; its pose seed for the shift signs).
+        extra: method name -> ordered markers (e.g. from ``--placements``); evaluated at each k
+            up to their length (prefixes), or at their full length when shorter than every k.
+
+    Methods come in registry order. A ``nested`` method (OMP) is placed once with max k and
+    evaluated on prefixes; a ``randomized`` one (random, uniform) draws its own placement for
+    every (run, k) with seed ``placement_seed + run``; any other is placed once per k.
+    """
+    from dataclasses import replace
+
+    from ..plan.planner import place
+
+    study = config.study
+    ks = sorted(set(study.ks))
+    runs: list[PlacementRun] = []
+
+    def add(method, run, k, markers):
+        markers = shift_markers(scale_markers(markers, study.tag_scale), study.shift, config.pose_seed)
+        runs.append(PlacementRun(method, run, k, tuple(markers)))
+
+    if NO_MARKERS in study.methods:
+        runs.append(PlacementRun(NO_MARKERS, 0, 0, ()))
+    for method, cls in PLACEMENT_METHODS.items():
+        if method not in study.methods:
+            continue
+        if cls.randomized:
+            for run in range(study.runs):
+                for k in ks:
+                    pl = place(data, replace(placement_config, k=k, method=method, seed=placement_config.seed + run),
+                               progress=False)
+                    add(method, run, k, pl.markers)
+        elif cls.nested:
+            pl = place(data, replace(placement_config, k=max(ks), method=method), progress=False)
+            for k in ks:
+                add(method, 0, k, pl.markers[:k])
+        else:
+            for k in ks:
+                add(method, 0, k, place(data, replace(placement_config, k=k, method=method), progress=False).markers)
+    for name, markers in (extra or {}).items():
+        fits = [k for k in ks if k <= len(markers)] or [len(markers)]
+        for k in fits:
+            add(name, 0, k, list(markers)[:k])
+    return runs
+
+
+def find_placement_files(folder: str | Path) -> dict[str, Path]:
+    """``placement.json`` (or any ``*.json``) files under ``folder`` -> method name.
+
+    The name is the parent folder for files called ``placement.json`` and the file stem
+    otherwise. Raises :class:`UserError` when nothing is found or names clash.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise UserError(f"--placements {folder} is not a directory")
+    found: dict[str, Path] = {}
+    for path in sorted(folder.rglob("*.json")):
+        # evaluate's own outputs and caches are not placements
+        if path.name.endswith(".meta.json") or path.name in ("config.json", "timings.json") or "cache" in path.relative_to(folder).parts:
+            continue
+        name = path.parent.name if path.name == "placement.json" else path.stem
+        if name in method_names():
+            name = f"{name}-file"
+        if name in found:
+            raise UserError(f"--placements: two files give the method name {name!r} ({found[name]}, {path}): rename one")
+        found[name] = path
+    if not found:
+        raise UserError(f"--placements {folder} holds no placement.json files: run `markerplace plan` first")
+    return found
