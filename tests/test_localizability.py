@@ -201,3 +201,25 @@ def test_visibility_rules() -> None:
 def test_noise_config_validation() -> None:
     with pytest.raises(ValueError):
         NoiseConfig(pixel_sigma=0.0)
+
+
+def test_compiled_kernel_gives_the_same_bits_fresh_and_from_numba_cache(tmp_path):
+    """The first run after install compiles the kernel, later runs load it from numba's cache:
+    both must give identical information matrices (FMA contraction was not allowed for this)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import sys, numpy as np\n"
+        "from markerplace.geometry import Intrinsics, world_from_cam_poses\n"
+        "from markerplace.plan.localizability import NoiseConfig, pose_information\n"
+        "rng = np.random.default_rng(0)\n"
+        "T = world_from_cam_poses(np.c_[rng.uniform(0, 5, (40, 2)), np.full(40, 1.5)], rng.uniform(0, 6.28, 40))\n"
+        "pts = rng.uniform(-5, 10, (3000, 3)); idx = np.sort(rng.integers(0, 40, 3000))\n"
+        "np.save(sys.argv[1], pose_information(T, Intrinsics().K, pts, idx, rng.integers(0, 5, 3000), NoiseConfig()))\n")
+    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+    for name in ("fresh", "cached"):
+        subprocess.run([sys.executable, str(script), str(tmp_path / f"{name}.npy")], env=env, check=True)
+    assert any((tmp_path / "numba_cache").rglob("*.nbi"))
+    assert np.array_equal(np.load(tmp_path / "fresh.npy"), np.load(tmp_path / "cached.npy"))

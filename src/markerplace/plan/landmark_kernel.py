@@ -9,7 +9,10 @@ threads with ``numba.prange``.
 
 The kernel is compiled on first use and cached on disk by numba (``cache=True``: the
 ``__pycache__`` folder next to this file, ``~/.cache/numba`` when that is read-only, or
-``NUMBA_CACHE_DIR``), so later processes start without compiling.
+``NUMBA_CACHE_DIR``), so later processes start without compiling. Fast-math allows
+reassociation (vectorized sums) but not FMA contraction: with contraction the freshly compiled
+kernel and the one loaded from the cache gave results differing in the last bits, so the first
+``plan`` after an install did not reproduce later ones bit for bit.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
 
-@numba.njit(parallel=True, cache=True, fastmath={'reassoc', 'contract', 'nsz', 'arcp'}, boundscheck=False)
+@numba.njit(parallel=True, cache=True, fastmath={'reassoc', 'nsz', 'arcp'}, boundscheck=False)
 def landmark_information_sums(R: np.ndarray, c_off: np.ndarray, pts: np.ndarray,
                               starts: np.ndarray, var: np.ndarray, fx: float, fy: float,
                               sig2: float, max_r2: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
