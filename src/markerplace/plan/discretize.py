@@ -35,19 +35,17 @@ import numpy as np
 
 from .. import geometry
 from ..errors import UserError
-# load and save are also importable from here for plan/planner.py; new code imports them from
-# .discretization
-from .discretization import Discretization, load, save  # noqa: F401
+from ..scene.raycast import RayCaster
+from .discretization import Discretization
 from .floorplan import eye_level_support, storey_floor
+from .freespace import Sections, camera_locations, free_space, obstacle_mask
 from .grid import Grid
 from .storeys import FloorConfig, cast_columns, find_storeys
-from .freespace import Sections, camera_locations, free_space, obstacle_mask
-from ..scene.raycast import RayCaster
 from .wall_candidates import CandidateConfig, wall_candidates
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DiscretizeConfig", "Discretization", "discretize", "save", "load"]
+__all__ = ["DiscretizeConfig", "discretize"]
 
 
 @dataclass(frozen=True)

@@ -24,9 +24,10 @@ from ..runtime import cache
 from ..runtime.executor import RuntimeConfig, make_executor
 from ..runtime.stages import cached
 from ..scene.spec import SceneSpec
-from .discretize import DiscretizeConfig, Discretization, discretize
-from .discretize import load as load_discretization
-from .discretize import save as save_discretization
+from .discretization import Discretization
+from .discretization import load as load_discretization
+from .discretization import save as save_discretization
+from .discretize import DiscretizeConfig, discretize
 from .localizability import (
     NoiseConfig,
     entropy,
