@@ -206,7 +206,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     log.info("observe: %d features with 3D points (%.0f per pose)", len(pose_index), len(pose_index) / max(N, 1))
 
     if config.placement.similarity:
-        sim_key = cache.hash_of("similarity-v1", obs_key, config.similarity)
+        sim_key = cache.hash_of("similarity-v2", obs_key, config.similarity)
         n_similar = cached("similarity", run_dir / "similarity.npz", sim_key,
                            lambda: count_similar(descriptors, points, config.similarity),
                            lambda n, path: write_npz(path, n_similar=n),

@@ -95,6 +95,7 @@ class SimilarityConfig:
     nlist_factor: float = 4.0
     nprobe: int = 16
     nprobe_max: int = 256
+    pca_dims: int = 64
     train_points_per_cell: int = 40
     train_iters: int = 10
     batch: int = 16384
@@ -150,14 +151,15 @@ class _Pairs:
             self.norm[s:s + chunk] = n
             self.X[s:s + chunk] = d / np.maximum(n, 1e-300)[:, None]
 
-    def count(self, queries: np.ndarray, lims: np.ndarray, sims: np.ndarray, labels: np.ndarray,
-              cos_t: float, min_d2: float) -> np.ndarray:
+    def count(self, queries: np.ndarray, lims: np.ndarray, sims: np.ndarray | None, labels: np.ndarray,
+              cos_t: float, min_d2: float) -> tuple[np.ndarray, np.ndarray]:
         """Exact look-alike counts of ``queries`` from their range-search candidates.
 
         Args:
             queries: (nq,) global row indices of the queries.
             lims, sims, labels: a FAISS range-search result (candidates of query k are
-                ``labels[lims[k]:lims[k+1]]`` with float32 cosines ``sims[...]``).
+                ``labels[lims[k]:lims[k+1]]``); ``sims``: their float32 cosines, or None to
+                compute them from ``X`` (when the search measured something else).
             cos_t: cosine threshold (strict); min_d2: squared minimum distance (strict).
 
         Returns:
@@ -171,7 +173,13 @@ class _Pairs:
         other = j != qi
         found = np.bincount(pos[other], minlength=nq) > 0
         far = (d2 > min_d2) & other
-        pos, qi, j, s = pos[far], qi[far], j[far], sims[far]
+        pos, qi, j = pos[far], qi[far], j[far]
+        if sims is None:  # the search ran on reduced vectors: the float32 cosine from X
+            s = np.empty(len(j), dtype=np.float32)
+            for a in range(0, len(j), 1 << 18):
+                s[a:a + (1 << 18)] = np.einsum("ij,ij->i", self.X[qi[a:a + (1 << 18)]], self.X[j[a:a + (1 << 18)]])
+        else:
+            s = sims[far]
         ok = s > cos_t + _BAND
         unsure = np.flatnonzero(~ok & (s > cos_t - _BAND))
         if len(unsure):
@@ -207,38 +215,55 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     return out
 
 
-def _search(index, pairs: _Pairs, queries: np.ndarray, config: SimilarityConfig,
-            probes: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Range-search ``queries`` (global row indices) in batches and count their look-alikes exactly.
+class _Searcher:
+    """A FAISS index over ``vectors`` and how to turn its range-search results into counts.
 
-    Args:
-        index: a FAISS index holding ``pairs.X``.
-        queries: (Q,) row indices.
-        probes: for an IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid scores): the cells
-            each query searches (``index.range_search_preassigned``); None: ``index.range_search``.
-
-    Returns:
-        (Q,) int64 counts and (Q,) bool: whether the query had any candidate (a pair within the
-        cosine band, at any 3D distance, other than itself).
+    Attributes:
+        index: the FAISS index (``IndexFlatIP`` over ``pairs.X``, or ``IndexIVFFlat``, L2, over
+            the reduced vectors).
+        vectors: (P, d) float32 vectors the index holds and the queries are taken from.
+        radius: the range-search radius (an inner product for IP, a squared distance for L2).
+        cosines: whether the index returns the float32 cosines (else they are computed from
+            ``pairs.X`` for the candidates).
     """
-    cos_t = float(config.cos_threshold)
-    min_d2 = float(config.min_distance) ** 2
-    radius = cos_t - _BAND
-    out = np.zeros(len(queries), dtype=np.int64)
-    found = np.zeros(len(queries), dtype=bool)
-    if probes is not None:
-        index.nprobe = probes[0].shape[1]
-    for s in range(0, len(queries), config.batch):
-        q = queries[s:s + config.batch]
-        contiguous = q[-1] - q[0] + 1 == len(q)
-        xq = pairs.X[q[0]:q[-1] + 1] if contiguous else pairs.X[q]
-        if probes is None:
-            lims, sims, labels = index.range_search(xq, radius)
-        else:
-            lims, sims, labels = index.range_search_preassigned(xq, radius, probes[0][s:s + len(q)],
-                                                                probes[1][s:s + len(q)])
-        out[s:s + len(q)], found[s:s + len(q)] = pairs.count(q, lims, sims, labels, cos_t, min_d2)
-    return out, found
+
+    def __init__(self, index, pairs: _Pairs, vectors: np.ndarray, radius: float, cosines: bool,
+                 config: SimilarityConfig):
+        self.index, self.pairs, self.vectors = index, pairs, vectors
+        self.radius, self.cosines, self.config = radius, cosines, config
+
+    def search(self, queries: np.ndarray, probes: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Range-search ``queries`` (global row indices) in batches; count look-alikes exactly.
+
+        Args:
+            queries: (Q,) row indices.
+            probes: for the IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid distances):
+                the cells each query searches, -1 = none (``range_search_preassigned``).
+
+        Returns:
+            (Q,) int64 counts and (Q,) bool: whether the query had any candidate other than
+            itself (at any 3D distance).
+        """
+        cfg = self.config
+        cos_t, min_d2 = float(cfg.cos_threshold), float(cfg.min_distance) ** 2
+        out = np.zeros(len(queries), dtype=np.int64)
+        found = np.zeros(len(queries), dtype=bool)
+        if probes is not None:
+            self.index.nprobe = probes[0].shape[1]
+        for s in range(0, len(queries), cfg.batch):
+            q = queries[s:s + cfg.batch]
+            contiguous = q[-1] - q[0] + 1 == len(q)
+            xq = self.vectors[q[0]:q[-1] + 1] if contiguous else self.vectors[q]
+            if probes is None:
+                lims, sims, labels = self.index.range_search(xq, self.radius)
+            else:
+                lims, sims, labels = self.index.range_search_preassigned(
+                    xq, self.radius, np.ascontiguousarray(probes[0][s:s + len(q)]),
+                    np.ascontiguousarray(probes[1][s:s + len(q)]))
+            out[s:s + len(q)], found[s:s + len(q)] = self.pairs.count(
+                q, lims, sims if self.cosines else None, labels, cos_t, min_d2)
+        return out, found
 
 
 def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
@@ -261,7 +286,7 @@ def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
     with _faiss_threads(config.threads):
         index = faiss.IndexFlatIP(descriptors.shape[1])
         index.add(pairs.X)
-        out, _ = _search(index, pairs, q, config)
+        out, _ = _Searcher(index, pairs, pairs.X, config.cos_threshold - _BAND, True, config).search(q)
     return out.astype(np.int32)
 
 
@@ -270,8 +295,8 @@ def _nlist(P: int, config: SimilarityConfig) -> int:
     return max(1, min(n, P))
 
 
-def _expand(index, quantizer, pairs: _Pairs, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
-            counts: np.ndarray, config: SimilarityConfig) -> None:
+def _expand(searcher: _Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
+            counts: np.ndarray) -> None:
     """Search ``queries`` in further cells by doubling rings of rank [n, 2 n), [2 n, 4 n), ...
     (n = ``searched.shape[1]``) up to ``nprobe_max``, while a query's last ring held a candidate.
 
@@ -279,15 +304,14 @@ def _expand(index, quantizer, pairs: _Pairs, queries: np.ndarray, searched: np.n
     quantizer ranks them differently now), so no pair is counted twice. Adds to ``counts``.
     """
     n = searched.shape[1]
-    scores, cells = quantizer.search(pairs.X[queries], nprobe_max)
-    row = np.arange(len(queries), dtype=np.int64)[:, None] * (index.nlist + 1)
+    dist, cells = quantizer.search(searcher.vectors[queries], nprobe_max)
+    row = np.arange(len(queries), dtype=np.int64)[:, None] * (searcher.index.nlist + 1)
     cells[np.isin(cells + row, searched + row)] = -1  # FAISS skips cells numbered -1
     active = np.arange(len(queries))
     lo = n
     while lo < nprobe_max and len(active):
         hi = min(2 * lo, nprobe_max)
-        c, found = _search(index, pairs, queries[active], config,
-                           (np.ascontiguousarray(cells[active, lo:hi]), np.ascontiguousarray(scores[active, lo:hi])))
+        c, found = searcher.search(queries[active], (cells[active, lo:hi], dist[active, lo:hi]))
         counts[queries[active]] += c
         active = active[found]
         lo = hi
@@ -295,7 +319,8 @@ def _expand(index, quantizer, pairs: _Pairs, queries: np.ndarray, searched: np.n
 
 def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
                       config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
-    """n_p by an ``IndexIVFFlat`` range search (see module docstring); never over-counts.
+    """n_p by an inverted-file range search on PCA-reduced vectors (see module docstring);
+    never over-counts.
 
     Args and returns as :func:`count_similar`.
     """
@@ -309,43 +334,57 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
     nprobe = min(config.nprobe, nlist)
     nprobe_max = max(nprobe, min(config.nprobe_max, nlist))
     rng = np.random.default_rng(config.seed)
-    n_train = min(P, max(nlist, config.train_points_per_cell * nlist))
+    n_train = min(P, max(nlist, config.train_points_per_cell * nlist, 4 * D))
+    d = config.pca_dims if 0 < config.pca_dims < D and n_train >= 4 * D else D  # PCA needs a sample
     train = pairs.X if n_train == P else pairs.X[np.sort(rng.choice(P, n_train, replace=False))]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     with _faiss_threads(config.threads):
-        quantizer = faiss.IndexFlatIP(D)
-        index = faiss.IndexIVFFlat(quantizer, D, nlist, faiss.METRIC_INNER_PRODUCT)
+        if d < D:
+            # orthonormal projection (no whitening): reduced distances never exceed full ones
+            pca = faiss.PCAMatrix(D, d)
+            pca.train(train)
+            Y = pca.apply(pairs.X)
+            train = pca.apply(train)
+        else:
+            Y = pairs.X
+        quantizer = faiss.IndexFlatL2(d)
+        index = faiss.IndexIVFFlat(quantizer, d, nlist, faiss.METRIC_L2)
         index.cp.seed = int(config.seed)
         index.cp.niter = int(config.train_iters)
         index.cp.max_points_per_centroid = n_train  # the sample is ours: FAISS must not resample
         index.cp.min_points_per_centroid = 1
         index.train(train)
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         # one quantizer pass: the nearest cell files the point, the nprobe nearest are searched
-        scores, cells = quantizer.search(pairs.X, nprobe)
+        dist, cells = quantizer.search(Y, nprobe)
         first = np.ascontiguousarray(cells[:, 0])  # named: swig_ptr does not keep the array alive
-        index.add_core(P, faiss.swig_ptr(pairs.X), None, faiss.swig_ptr(first))
-        t2 = time.perf_counter()
+        index.add_core(P, faiss.swig_ptr(Y), None, faiss.swig_ptr(first))
+        t2, c2 = time.perf_counter(), time.process_time()
+        # unit vectors: cos > t - band <=> |x - y|^2 < 2 - 2 (t - band); the projection keeps
+        # every such pair inside the radius (the band also covers float32 rounding)
+        searcher = _Searcher(index, pairs, Y, 2.0 - 2.0 * (config.cos_threshold - _BAND), False, config)
         counts = np.zeros(P, dtype=np.int64)
         # every point searches its nprobe nearest cells, in two halves; a point whose farther
         # half still held a candidate searches on (a dense group of look-alikes that k-means
-        # split over more than nprobe cells)
+        # split over more than nprobe cells). Queries go in the order of their cells, so
+        # neighbouring queries scan the same inverted lists while they are in cache.
         h = (nprobe + 1) // 2
-        everyone = np.arange(P)
-        c, _ = _search(index, pairs, everyone, config,
-                       (np.ascontiguousarray(cells[:, :h]), np.ascontiguousarray(scores[:, :h])))
-        counts += c
+        everyone = np.argsort(first, kind="stable")
+        c, _ = searcher.search(everyone, (cells[everyone, :h], dist[everyone, :h]))
+        counts[everyone] += c
+        go_on = everyone[:0]
         if nprobe > h:
-            c, found = _search(index, pairs, everyone, config,
-                               (np.ascontiguousarray(cells[:, h:]), np.ascontiguousarray(scores[:, h:])))
-            counts += c
-            go_on = everyone[found] if nprobe_max > nprobe else everyone[:0]
-            for s in range(0, len(go_on), config.batch):
-                _expand(index, quantizer, pairs, go_on[s:s + config.batch], cells[go_on[s:s + config.batch]],
-                        nprobe_max, counts, config)
-            log.debug("similarity ivf: %d of %d points searched beyond %d cells", len(go_on), P, nprobe)
-    log.debug("similarity ivf: %d points, %d cells, nprobe %d (max %d): train %.1f s, assign + add %.1f s, "
-              "search %.1f s", P, nlist, nprobe, nprobe_max, t1 - t0, t2 - t1, time.perf_counter() - t2)
+            c, found = searcher.search(everyone, (cells[everyone, h:], dist[everyone, h:]))
+            counts[everyone] += c
+            if nprobe_max > nprobe:
+                go_on = everyone[found]
+        for s in range(0, len(go_on), config.batch):
+            q = go_on[s:s + config.batch]
+            _expand(searcher, quantizer, q, cells[q], nprobe_max, counts)
+    log.debug("similarity ivf: %d points, PCA %d, %d cells, nprobe %d, %d points searched further (max %d); "
+              "wall (CPU) seconds: train %.1f (%.1f), assign + add %.1f (%.1f), search %.1f (%.1f)",
+              P, d, nlist, nprobe, len(go_on), nprobe_max, t1 - t0, c1 - c0, t2 - t1, c2 - c1,
+              time.perf_counter() - t2, time.process_time() - c2)
     return counts.astype(np.int32)
 
 
