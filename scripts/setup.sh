@@ -8,7 +8,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # libusb/libgl1/libgomp1: loaded by Open3D (ray casting, TSDF fusion) even without a device or screen
-DEB_PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglib2.0-0 libgl1 libusb-1.0-0 libgomp1)
+# poppler-utils: pdftoppm, which the tests use to rasterize tags.pdf
+DEB_PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglib2.0-0 libgl1 libusb-1.0-0 libgomp1 poppler-utils)
 PYTHON=${PYTHON:-python3}
 # Debian splits venv/ensurepip out of python3: install it when creating .venv would fail.
 if [ ! -x .venv/bin/python ] && ! "$PYTHON" -c "import ensurepip, venv" >/dev/null 2>&1; then
