@@ -1,0 +1,353 @@
+"""Print-ready ``tags.pdf``: every placed tag at its exact physical size, tiled when the paper
+is too small.
+
+Units are millimetres on paper (PDF points = mm x 72 / 25.4; reportlab draws in points with
+exact floating-point coordinates). A tag's *sheet* is the drawn square (black square plus the
+white quiet zone, edge :func:`markerplace.render.tags.outer_size`) and, under it, the caption of
+:func:`markerplace.report.printable.caption_for` (the caption marks the bottom edge).
+
+Per tag, in placement order:
+
+* **fits the paper** (sheet inside the printable area, portrait or landscape): one page, the
+  sheet centred, a 100 mm check bar in the bottom margin ("print at 100 %").
+* **larger than the paper**: a *page map* (the whole tag scaled down with the tile grid, tile
+  names A1, A2, ... row letter from the top, column number from the left, the caption and the
+  instructions), then one page per tile at exact size. Neighbouring tiles share an
+  ``overlap``-wide strip of identical content; alignment crosshairs (thin cyan circles and
+  crosses) sit at the same tag coordinates on both tiles of every strip, so laying one tile
+  over the other with the crosshairs on top of each other restores the tag exactly. Each tile
+  page names the tile, its neighbours and the tag, and has the check bar.
+* ``paper="none"``: one page per tag at the sheet's own size plus a white margin (for a print
+  shop or a plotter).
+
+:func:`tile_layout` is the tiling geometry (tests reassemble tiled tags from it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ..errors import UserError
+from ..io_utils import atomic_path
+from ..render.tags import outer_size
+from .printable import caption_for, tag_modules
+
+PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4), "a3": (297.0, 420.0)}
+"""Portrait paper sizes (width, height), millimetres."""
+PAPER_CHOICES = (*PAPERS_MM, "none")
+MARGIN_MM = 12.0
+"""White margin on every side of a page (office printers leave 4-6 mm unprinted)."""
+OVERLAP_MM = 20.0
+"""Width of the strip neighbouring tiles share."""
+CHECK_BAR_MM = 100.0
+"""Length of the printed check bar (measure it: the print is exact when it is 100 mm)."""
+MARK_RGB = (0.0, 1.0, 1.0)
+"""Alignment marks in cyan: visible on black and white, light enough for the detector."""
+PT_PER_MM = 72.0 / 25.4
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One printed tile of a tag.
+
+    Attributes:
+        name: ``A1`` = top row, left column (row letter from the top, column number from the left).
+        row, col: indices from the top-left.
+        region: (x0, y0, x1, y1) millimetres on the tag square, origin at its top-left corner,
+            y down: the part of the tag this tile shows (overlap strips included).
+        page_origin: (x, y) millimetres from the page's top-left corner to the region's top-left.
+    """
+
+    name: str
+    row: int
+    col: int
+    region: tuple[float, float, float, float]
+    page_origin: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class TileLayout:
+    """How one tag square of edge ``edge`` mm is cut into ``rows`` x ``cols`` tiles on pages
+    of ``page`` (width, height) mm; ``steps`` (x, y) is the distance between tile origins."""
+
+    edge: float
+    page: tuple[float, float]
+    rows: int
+    cols: int
+    steps: tuple[float, float]
+    overlap: float
+    tiles: tuple[Tile, ...]
+
+    def marks(self) -> list[tuple[float, float]]:
+        """Alignment-mark centres (x, y) in tag millimetres: two per shared strip and tile edge."""
+        out = []
+        sx, sy = self.steps
+        h_tile, w_tile = sy + self.overlap, sx + self.overlap
+        for c in range(1, self.cols):  # vertical strips between columns
+            x = c * sx + self.overlap / 2
+            for r in range(self.rows):
+                out += [(x, r * sy + f * h_tile) for f in (0.3, 0.7)]
+        for r in range(1, self.rows):  # horizontal strips between rows
+            y = r * sy + self.overlap / 2
+            for c in range(self.cols):
+                out += [(c * sx + f * w_tile, y) for f in (0.3, 0.7)]
+        return out
+
+
+def _split(edge: float, avail: float, overlap: float) -> tuple[int, float]:
+    """(n, step): n tiles of width step + overlap <= avail covering [0, edge]."""
+    if edge <= avail:
+        return 1, edge
+    n = math.ceil((edge - overlap) / (avail - overlap))
+    return n, (edge - overlap) / n
+
+
+def tile_layout(edge_mm: float, paper: str, margin: float = MARGIN_MM, overlap: float = OVERLAP_MM) -> TileLayout:
+    """Tiling of a tag square of ``edge_mm`` onto ``paper`` (a name of :data:`PAPERS_MM`),
+    portrait or landscape, whichever needs fewer pages (portrait on a tie). Tiles are all the
+    same size and centred on their pages."""
+    best = None
+    for page in (PAPERS_MM[paper], PAPERS_MM[paper][::-1]):
+        aw, ah = page[0] - 2 * margin, page[1] - 2 * margin
+        cols, sx = _split(edge_mm, aw, overlap)
+        rows, sy = _split(edge_mm, ah, overlap)
+        if best is None or rows * cols < best[0]:
+            best = (rows * cols, page, rows, cols, sx, sy)
+    _, page, rows, cols, sx, sy = best
+    w = sx + (overlap if cols > 1 else 0.0)
+    h = sy + (overlap if rows > 1 else 0.0)
+    origin = ((page[0] - w) / 2, (page[1] - h) / 2)
+    tiles = tuple(Tile(f"{chr(65 + r) if r < 26 else 'R' + str(r + 1)}{c + 1}", r, c,
+                       (c * sx, r * sy, c * sx + w, r * sy + h), origin)
+                  for r in range(rows) for c in range(cols))
+    return TileLayout(edge_mm, page, rows, cols, (sx, sy), overlap if rows * cols > 1 else 0.0, tiles)
+
+
+def caption_block_mm(edge_mm: float, lines: Sequence[str]) -> tuple[float, float, float]:
+    """(strip height, line pitch, font size) of the caption under a sheet of ``edge_mm``, as in
+    :func:`markerplace.report.printable.tag_svg`."""
+    line_mm = max(6.0, 0.04 * edge_mm)
+    font = min(0.75 * line_mm, 0.95 * edge_mm / (0.55 * max(1, max(len(t) for t in lines))))
+    return line_mm * (len(lines) + 0.5), line_mm, font
+
+
+class _Pdf:
+    """A reportlab canvas with a top-left millimetre coordinate helper."""
+
+    def __init__(self, path: Path, title: str):
+        from reportlab.pdfgen.canvas import Canvas
+
+        self.c = Canvas(str(path), invariant=1, pageCompression=1)
+        self.c.setTitle(title)
+        self.c.setCreator("markerplace")
+        self.h = 0.0
+
+    def page(self, size_mm: tuple[float, float]) -> None:
+        self.c.setPageSize((size_mm[0] * PT_PER_MM, size_mm[1] * PT_PER_MM))
+        self.h = size_mm[1]
+
+    def xy(self, x: float, y: float) -> tuple[float, float]:
+        """Points from millimetres measured from the page's top-left corner (y down)."""
+        return x * PT_PER_MM, (self.h - y) * PT_PER_MM
+
+    def text(self, x: float, y: float, s: str, size_mm: float, anchor: str = "left") -> None:
+        self.c.setFont("Helvetica", size_mm * PT_PER_MM)
+        px, py = self.xy(x, y)
+        {"left": self.c.drawString, "centre": self.c.drawCentredString, "right": self.c.drawRightString}[anchor](px, py, s)
+
+    def modules(self, tag_id: int, x0: float, y0: float, edge: float, clip=None) -> None:
+        """The tag (quiet zone included) as one filled path, square top-left at (x0, y0) mm;
+        ``clip`` (x, y, w, h) mm limits the drawing (tiles)."""
+        c = self.c
+        bits = tag_modules(tag_id)
+        n = bits.shape[0]
+        cell = edge / n
+        c.saveState()
+        if clip is not None:
+            p = c.beginPath()
+            px, py = self.xy(clip[0], clip[1] + clip[3])
+            p.rect(px, py, clip[2] * PT_PER_MM, clip[3] * PT_PER_MM)
+            c.clipPath(p, stroke=0, fill=0)
+        c.setFillColorRGB(1, 1, 1)
+        px, py = self.xy(x0, y0 + edge)
+        c.rect(px, py, edge * PT_PER_MM, edge * PT_PER_MM, stroke=0, fill=1)
+        path = c.beginPath()
+        for r in range(n):
+            col = 0
+            while col < n:
+                if bits[r, col]:
+                    end = col
+                    while end < n and bits[r, end]:
+                        end += 1
+                    px, py = self.xy(x0 + col * cell, y0 + (r + 1) * cell)
+                    path.rect(px, py, (end - col) * cell * PT_PER_MM, cell * PT_PER_MM)
+                    col = end
+                else:
+                    col += 1
+        c.setFillColorRGB(0, 0, 0)
+        c.drawPath(path, stroke=0, fill=1)
+        c.restoreState()
+
+    def check_bar(self, page_mm: tuple[float, float]) -> None:
+        """A 100 mm bar, 2 mm high, in the bottom margin, with its label."""
+        x, y = (page_mm[0] - CHECK_BAR_MM) / 2, page_mm[1] - MARGIN_MM / 2
+        self.c.setFillColorRGB(0, 0, 0)
+        px, py = self.xy(x, y)
+        self.c.rect(px, py, CHECK_BAR_MM * PT_PER_MM, 1.5 * PT_PER_MM, stroke=0, fill=1)
+        self.text(page_mm[0] / 2, y + 4.0, "this bar is 100 mm when printed at 100 % (actual size)", 2.6, "centre")
+
+    def mark(self, x: float, y: float) -> None:
+        """An alignment crosshair at (x, y) mm: a 3 mm circle and a 10 mm cross."""
+        c = self.c
+        c.setStrokeColorRGB(*MARK_RGB)
+        c.setLineWidth(0.35 * PT_PER_MM)
+        px, py = self.xy(x, y)
+        c.circle(px, py, 3.0 * PT_PER_MM, stroke=1, fill=0)
+        c.line(px - 5 * PT_PER_MM, py, px + 5 * PT_PER_MM, py)
+        c.line(px, py - 5 * PT_PER_MM, px, py + 5 * PT_PER_MM)
+
+
+def _sheet_fits(sheet: tuple[float, float], paper: str) -> tuple[float, float] | None:
+    """The page (portrait first, then landscape) whose printable area holds the sheet, or None."""
+    for page in (PAPERS_MM[paper], PAPERS_MM[paper][::-1]):
+        if sheet[0] <= page[0] - 2 * MARGIN_MM and sheet[1] <= page[1] - 2 * MARGIN_MM:
+            return page
+    return None
+
+
+def _single_page(pdf: _Pdf, rec: dict, page: tuple[float, float], with_bar: bool) -> None:
+    edge = 1000.0 * outer_size(rec["size"])
+    lines = caption_for(rec)
+    strip, pitch, font = caption_block_mm(edge, lines)
+    pdf.page(page)
+    x0, y0 = (page[0] - edge) / 2, (page[1] - edge - strip) / 2
+    pdf.modules(rec["tag_id"], x0, y0, edge)
+    pdf.c.setFillColorRGB(0, 0, 0)
+    for i, line in enumerate(lines):
+        pdf.text(page[0] / 2, y0 + edge + (i + 1) * pitch, line, font, "centre")
+    if with_bar:
+        pdf.check_bar(page)
+    pdf.c.showPage()
+
+
+def _page_map(pdf: _Pdf, rec: dict, lay: TileLayout, paper: str) -> None:
+    """The overview page of a tiled tag: scaled tag, tile grid, caption, instructions."""
+    page = PAPERS_MM[paper]
+    pdf.page(page)
+    c = pdf.c
+    c.setFillColorRGB(0, 0, 0)
+    y = MARGIN_MM + 6
+    pdf.text(MARGIN_MM, y, f"Page map: tag {rec['tag_id']} (#{rec['order']}), printed in {lay.rows} x {lay.cols} "
+                           f"tiles on {paper.upper()}", 5.0)
+    for line in caption_for(rec)[:2]:
+        y += 6
+        pdf.text(MARGIN_MM, y, line, 3.6)
+    box = min(page[0] - 2 * MARGIN_MM, page[1] * 0.5)
+    scale = box / lay.edge
+    bx, by = (page[0] - box) / 2, y + 8
+    pdf.modules(rec["tag_id"], bx, by, box)
+    c.setStrokeColorRGB(0.9, 0.1, 0.1)
+    c.setLineWidth(0.4 * PT_PER_MM)
+    for t in lay.tiles:
+        x0, y0, x1, y1 = (v * scale for v in t.region)
+        px, py = pdf.xy(bx + x0, by + y1)
+        c.rect(px, py, (x1 - x0) * PT_PER_MM, (y1 - y0) * PT_PER_MM, stroke=1, fill=0)
+    c.setFillColorRGB(0.9, 0.1, 0.1)
+    for t in lay.tiles:
+        x0, y0, x1, y1 = (v * scale for v in t.region)
+        pdf.text(bx + (x0 + x1) / 2, by + (y0 + y1) / 2 + 2, t.name, 6.0, "centre")
+    c.setFillColorRGB(0, 0, 0)
+    y = by + box + 8
+    steps = [
+        f"1. Print every page at 100 % (actual size, no 'fit to page'); the bar at the bottom of each page must be 100 mm.",
+        f"2. Lay the tiles out as above: rows A, B, ... from the top, columns 1, 2, ... from the left.",
+        f"3. Neighbouring tiles share a {lay.overlap:.0f} mm strip with cyan crosshairs: trim the white margin of one",
+        "    tile along the printed edge, lay it over its neighbour so every crosshair sits exactly on its twin,",
+        "    and tape from the back. Work row by row, then join the rows.",
+        f"4. The assembled black square must measure {1000 * rec['size']:.0f} mm; hang it with row "
+        f"{lay.tiles[-1].name[0]} at the bottom (this side down).",
+    ]
+    for s in steps:
+        pdf.text(MARGIN_MM, y, s, 3.0)
+        y += 5
+    pdf.check_bar(page)
+    c.showPage()
+
+
+def _tile_pages(pdf: _Pdf, rec: dict, lay: TileLayout) -> None:
+    names = {(t.row, t.col): t.name for t in lay.tiles}
+    marks = lay.marks()
+    for t in lay.tiles:
+        pdf.page(lay.page)
+        x0, y0, x1, y1 = t.region
+        ox, oy = t.page_origin
+        pdf.modules(rec["tag_id"], ox - x0, oy - y0, lay.edge, clip=(ox, oy, x1 - x0, y1 - y0))
+        for mx, my in marks:
+            if x0 <= mx <= x1 and y0 <= my <= y1:
+                pdf.mark(ox + mx - x0, oy + my - y0)
+        c = pdf.c
+        c.setStrokeColorRGB(0.6, 0.6, 0.6)  # trim corners: where the printed region ends
+        c.setLineWidth(0.2 * PT_PER_MM)
+        for cx, cy in ((ox, oy), (ox + x1 - x0, oy), (ox, oy + y1 - y0), (ox + x1 - x0, oy + y1 - y0)):
+            for dx, dy in ((-4, 0), (4, 0), (0, -4), (0, 4)):
+                inside = (ox <= cx + dx <= ox + x1 - x0) and (oy <= cy + dy <= oy + y1 - y0)
+                if not inside:
+                    c.line(*pdf.xy(cx, cy), *pdf.xy(cx + dx, cy + dy))
+        around = [f"{side} {names[(t.row + dr, t.col + dc)]}" for side, dr, dc in
+                  (("above", -1, 0), ("left", 0, -1), ("right", 0, 1), ("below", 1, 0))
+                  if (t.row + dr, t.col + dc) in names]
+        c.setFillColorRGB(0, 0, 0)
+        pdf.text(MARGIN_MM, oy - 6, f"tag {rec['tag_id']} (#{rec['order']})  tile {t.name} of {lay.rows} x {lay.cols}"
+                                    f"  -  {', '.join(around)}", 3.2)
+        if t.row == lay.rows - 1:
+            pdf.text(lay.page[0] - MARGIN_MM, oy + (y1 - y0) + 4, "this side down", 3.2, "right")
+        pdf.check_bar(lay.page)
+        c.showPage()
+
+
+def write_tags_pdf(path: str | Path, records: Sequence[dict], paper: str = "a4") -> int:
+    """Write ``tags.pdf`` for ``placement.json`` marker records (see module docstring), atomically.
+
+    Args:
+        path: output file.
+        records: dicts with ``order``, ``tag_id``, ``family``, ``size`` (metres), ``position``,
+            ``yaw_deg`` (the caption's fields).
+        paper: ``a4``, ``letter``, ``a3`` or ``none`` (one page per tag at its own size).
+
+    Returns:
+        The number of pages.
+    """
+    paper = str(paper).lower()
+    if paper not in PAPER_CHOICES:
+        raise UserError(f"--paper {paper!r} is not a paper size; use one of {', '.join(PAPER_CHOICES)}")
+    pages = 0
+    with atomic_path(path) as tmp:
+        pdf = _Pdf(tmp, "markerplace tags")
+        for rec in records:
+            edge = 1000.0 * outer_size(rec["size"])
+            strip = caption_block_mm(edge, caption_for(rec))[0]
+            sheet = (edge, edge + strip)
+            if paper == "none":
+                _single_page(pdf, rec, (sheet[0] + 2 * MARGIN_MM, sheet[1] + 2 * MARGIN_MM), with_bar=False)
+                pages += 1
+                continue
+            page = _sheet_fits(sheet, paper)
+            if page is not None:
+                _single_page(pdf, rec, page, with_bar=True)
+                pages += 1
+                continue
+            lay = tile_layout(edge, paper)
+            _page_map(pdf, rec, lay, paper)
+            _tile_pages(pdf, rec, lay)
+            pages += 1 + len(lay.tiles)
+        if not records:
+            pdf.page(PAPERS_MM.get(paper, PAPERS_MM["a4"]))
+            pdf.text(MARGIN_MM, MARGIN_MM + 6, "no tags placed", 5.0)
+            pdf.c.showPage()
+            pages = 1
+        pdf.c.save()
+    return pages
+
