@@ -232,3 +232,45 @@ def test_feature_writer_streams_parts_and_resumes(tmp_path):
     for i, f in enumerate(imgs):
         assert np.array_equal(fs.image(i).descriptors, f.descriptors)
         assert np.array_equal(fs.extras["flag"][i], f.extras["flag"])
+
+
+def test_reusing_unchanged_queries_changes_no_result(tmp_path):
+    """Queries that a placement's markers cannot change take the no-marker result: identical
+    predictions to localizing every query. Both paths are exercised: OMP's tags change the
+    retrieval of tiny's queries (they are localized again), a tag on the outside of the house
+    changes nothing (nearly every query takes the no-marker result)."""
+    from dataclasses import replace
+
+    from markerplace.geometry import world_from_marker_pose
+    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.planner import PlanConfig
+    from markerplace.runtime.executor import RuntimeConfig
+    from markerplace.scene.spec import SceneSpec
+    from markerplace.testbed.experiment import run_evaluation
+
+    outside = Marker(30, 0.4, world_from_marker_pose(np.array([-0.15, 1.7, 1.5]), np.array([-1.0, 0.0, 0.0])))
+    (tmp_path / "extra" / "outside").mkdir(parents=True)
+    (tmp_path / "extra" / "outside" / "placement.json").write_text(json.dumps({"markers": [outside.to_json()]}))
+    plan = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=4),
+                      runtime=RuntimeConfig(workers=1))
+    config = tbconfig.EvaluateConfig(test=tbconfig.TestSetConfig(tests=12, sets=("weighted",)),
+                                     study=tbconfig.StudyConfig(methods=("none", "omp"), runs=1, ks=(3,)))
+    import shutil
+
+    errors = {}
+    for reuse in (False, True):
+        out = tmp_path / f"reuse_{reuse}"
+        if reuse:  # the same plan, map and query features; only the predictions are made again
+            shutil.copytree(tmp_path / "reuse_False", out, ignore=shutil.ignore_patterns("predictions"))
+        run_evaluation(SceneSpec("tiny"), plan, config, out, placements_dir=tmp_path / "extra", progress=False,
+                       reuse_unchanged=reuse)
+        errors[reuse] = np.load(out / "query_errors.npz")
+        metas = [json.loads(p.read_text()) for p in (out / "cache" / "predictions").glob("*.meta.json")]
+        localized = {(m["method"], m["k"]): m["localized"] for m in metas}
+        assert localized[("omp", 3)] > 0
+        # (a query whose image edge the tag is near counts as seeing it: the in-view test is conservative)
+        assert localized[("outside", 1)] < 4 if reuse else localized[("outside", 1)] == 12
+    assert errors[True]["weighted_method"].tolist() == ["none", "omp", "outside"]
+    for key in errors[False].files:
+        a, b = errors[False][key], errors[True][key]
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), key

@@ -89,7 +89,7 @@ def _codebook(path: Path, key: str, map_base: BaseImages, config, timings: dict)
 
 
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
-                   imaging_config=None, progress: bool = True) -> EvaluationResult:
+                   imaging_config=None, progress: bool = True, reuse_unchanged: bool = True) -> EvaluationResult:
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
@@ -105,6 +105,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         imaging_config: the testbed's imaging (default: the plan's camera with the
             localization SIFT preset, OpenCV defaults).
         progress: progress bars.
+        reuse_unchanged: give queries no placement's marker can change the no-marker result
+            instead of localizing them again (exact; see :func:`_predict_all`).
     """
     from ..imaging.config import SIFT_DEFAULT
     from ..io_utils import write_json
@@ -159,11 +161,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         timings["queries_no_markers"] = time.perf_counter() - t0
 
         predictions = _predict_all(tb, placements, map_base, query_base, test_poses, codebook, cb_key, lcfg,
-                                   imaging, cache_dir, timings)
+                                   imaging, cache_dir, timings, reuse_unchanged)
 
     t0 = time.perf_counter()
     rows, summary = write_outputs(out, scene.name, placements, predictions, test_poses, data.base_score, config,
-                                  plan_config)
+                                  plan_config, scene=scene)
     timings["report"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
     write_json(out / "timings.json", {k: round(v, 3) for k, v in timings.items()})
@@ -171,14 +173,61 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     return EvaluationResult(rows, summary, timings)
 
 
+class _Retrieval:
+    """The VLAD retrieval of the queries that see no marker, replayed in this process to tell
+    which of them a placement cannot change (exact, see :func:`_predict_all`).
+
+    ``vlad`` (M, D) float32 holds the marker-free map images' VLAD vectors exactly as a
+    worker's :class:`~markerplace.localization.database.MapDatabase` computes them; a
+    placement replaces the rows of its re-rendered images.
+    """
+
+    def __init__(self, codebook, map_base: BaseImages, num_candidates: int):
+        self.codebook = codebook
+        self.n = int(num_candidates)
+        feats = map_base.features
+        self.vlad = np.stack([codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
+                              for i in range(len(feats))]).astype(np.float32) if len(feats) else None
+        self._queries: dict = {}
+
+    def query_vlads(self, name: str, base: BaseImages) -> np.ndarray:
+        if name not in self._queries:
+            feats = base.features
+            self._queries[name] = [self.codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
+                                   for i in range(len(feats))]
+        return self._queries[name]
+
+    def candidates(self, vlad: np.ndarray, query: np.ndarray) -> tuple:
+        from ..localization.vlad import nearest
+
+        return tuple(int(i) for i in nearest(vlad, query, self.n)[0])
+
+
 def _predict_all(tb: TestbedImaging, placements, map_base: BaseImages, query_base: dict, test_poses: dict, codebook,
-                 cb_key: str, lcfg, imaging, cache_dir: Path, timings: dict) -> dict:
-    """Predictions of every placement and test set (stage 6 of the module docstring)."""
+                 cb_key: str, lcfg, imaging, cache_dir: Path, timings: dict, reuse: bool = True) -> dict:
+    """Predictions of every placement and test set (stage 6 of the module docstring).
+
+    With ``reuse``, a query that no marker of a placement can change gets the no-marker
+    prediction without localizing again: its view holds none of the placement's markers (so its
+    features and tags are the marker-free ones), the map images its VLAD retrieval returns
+    against this placement's map are the ones it returns against the marker-free map, in the
+    same order, and none of them was re-rendered. The localizer then sees identical inputs
+    (and seeds RANSAC per query), so the result is identical: this skips work, it approximates
+    nothing (``tests/test_testbed.py`` compares both paths).
+    """
+    from ..localization.localizer import LOCALIZERS
+
     pred_dir = cache_dir / "predictions"
     timings.setdefault("map_with_markers", 0.0)
     timings.setdefault("localize", 0.0)
     predictions: dict[tuple, np.ndarray] = {}
     feature_cache: dict[tuple, ImageFeatures] = {}
+    name, settings = lcfg
+    conf = LOCALIZERS.lookup(name).default_conf
+    retrieval = None
+    if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
+        retrieval = _Retrieval(codebook, map_base, conf.num_candidates)
+    reused = 0
     for p in placements:
         marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]
         pending = []
@@ -192,29 +241,56 @@ def _predict_all(tb: TestbedImaging, placements, map_base: BaseImages, query_bas
         if not pending:
             continue
         t0 = time.perf_counter()
-        db_dir = _placement_map(tb, p, map_base, feature_cache, codebook, cache_dir / f"db_{cache.hash_of(cb_key, marker_arr)}")
+        db_dir, changed, feats = _placement_map(tb, p, map_base, feature_cache, codebook,
+                                                cache_dir / f"db_{cache.hash_of(cb_key, marker_arr)}")
         timings["map_with_markers"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
+            vlad = None
+            if retrieval is not None and p.markers:
+                vlad = retrieval.vlad.copy()
+                for i in changed:
+                    vlad[i] = codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
             for ts, key in pending:
                 tp = test_poses[ts]
                 qkeys = tb.view_keys(query_base[ts].in_view, p.markers)
+                base = predictions.get(("none", 0, 0, ts))
+                todo = list(range(len(tp)))
+                est = np.full((len(tp), 4, 4), np.nan)
+                if vlad is not None and base is not None:
+                    qv = retrieval.query_vlads(ts, query_base[ts])
+                    same = [i for i in todo if not qkeys[i] and _unchanged(retrieval, vlad, qv[i], changed)]
+                    est[same] = base[same]
+                    reused += len(same)
+                    todo = sorted(set(todo) - set(same))
                 items = [(str(db_dir), lcfg, None if qkeys[i] else query_base[ts].features.image(i), tp.world_from_cam[i],
-                          list(p.markers) if qkeys[i] else []) for i in range(len(tp))]
+                          list(p.markers) if qkeys[i] else []) for i in todo]
                 got = dict(tb.run(localize_task, items, f"localize {ts} {p.method} k={p.k} run {p.run}"))
-                est = np.stack([got[i] for i in range(len(tp))]) if len(tp) else np.zeros((0, 4, 4))
-                save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=ts)
+                for j, i in enumerate(todo):
+                    est[i] = got[j]
+                save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=ts,
+                                localized=len(todo))
                 predictions[(p.method, p.run, p.k, ts)] = est
         finally:
             shutil.rmtree(db_dir, ignore_errors=True)
         timings["localize"] += time.perf_counter() - t0
+    if reused:
+        log.info("localize: %d queries no placement's markers could change took the no-marker result", reused)
     return predictions
 
 
-def _placement_map(tb: TestbedImaging, p, map_base: BaseImages, feature_cache: dict, codebook, db_dir: Path) -> Path:
+def _unchanged(retrieval: _Retrieval, vlad: np.ndarray, query: np.ndarray, changed: set) -> bool:
+    """The query's retrieval against the placement's map equals the marker-free one and none
+    of the retrieved images changed."""
+    cand = retrieval.candidates(vlad, query)
+    return not (set(cand) & changed) and cand == retrieval.candidates(retrieval.vlad, query)
+
+
+def _placement_map(tb: TestbedImaging, p, map_base: BaseImages, feature_cache: dict, codebook, db_dir: Path):
     """Write the map database of placement ``p``: marker-free features, except for the images
     with one of its markers in view, re-rendered (or taken from ``feature_cache``, keyed by
-    image and markers in view, which it updates)."""
+    image and markers in view, which it updates). Returns the folder, the set of re-rendered
+    image indices and the map's features."""
     keys = tb.view_keys(map_base.in_view, p.markers)
     need = [i for i, k in enumerate(keys) if k and (i, k) not in feature_cache]
     if need:
@@ -227,4 +303,4 @@ def _placement_map(tb: TestbedImaging, p, map_base: BaseImages, feature_cache: d
     feats = map_base.features.with_images({i: feature_cache[(i, k)] for i, k in enumerate(keys) if k}) \
         if used else map_base.features
     save_map(db_dir, feats, map_base.world_from_cam, p.markers, codebook.centres)
-    return db_dir
+    return db_dir, {i for i, _ in used}, feats
