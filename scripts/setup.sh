@@ -9,7 +9,9 @@ cd "$(dirname "$0")/.."
 
 # libusb/libgl1/libgomp1: loaded by Open3D (ray casting, TSDF fusion) even without a device or screen
 # poppler-utils: pdftoppm, which the tests use to rasterize tags.pdf
-DEB_PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglib2.0-0 libgl1 libusb-1.0-0 libgomp1 poppler-utils)
+# chromium/chromium-driver: headless browser of the report.html tests (selenium drives /usr/bin/chromedriver)
+DEB_PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglib2.0-0 libgl1 libusb-1.0-0 libgomp1 poppler-utils
+              chromium chromium-driver)
 PYTHON=${PYTHON:-python3}
 # Debian splits venv/ensurepip out of python3: install it when creating .venv would fail.
 if [ ! -x .venv/bin/python ] && ! "$PYTHON" -c "import ensurepip, venv" >/dev/null 2>&1; then

@@ -108,7 +108,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
     log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in data.timings.items()))
+    from ..report.plan_report import write_plan_report
+
+    report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, scores.npz, scores.png, gain_first.png, placement.png, config.json")
+    print(f"wrote {report}")
     return 0
 
 

@@ -18,8 +18,9 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(out: Path, scene_name: str, placements, predictions: dict, test_poses: dict,
-                  base_score: np.ndarray, config, plan_config) -> tuple[list[dict], str]:
-    """recall.csv, query_errors.npz, tables.md, recall_vs_k.png and config.json from predictions.
+                  base_score: np.ndarray, config, plan_config, scene=None) -> tuple[list[dict], str]:
+    """recall.csv, query_errors.npz, tables.md, recall_vs_k.png, config.json and report.html
+    (:func:`markerplace.report.eval_report.write_evaluation_report`) from predictions.
 
     Args:
         out: the run folder.
@@ -30,6 +31,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
         config, plan_config: the evaluate and plan settings.
+        scene: the scene (internal frame), to render report.html's gallery (None: no images).
 
     Returns:
         The recall rows and the markdown of the main table (first test set, main threshold).
@@ -76,4 +78,8 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
     write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config)})
+    from ..report.eval_report import write_evaluation_report
+
+    write_evaluation_report(out, scene_name, placements, predictions, test_poses, config, plan_config.imaging.camera,
+                            scene=scene)
     return rows, summary

@@ -1,0 +1,171 @@
+"""``report.html`` of a plan run: one self-contained page for the people who act on the plan.
+
+Sections: the scene (storeys and floor heights, floor area, camera poses, candidate spots and
+what the discretization removed, from ``placement.json``'s summary), the localizability scores
+before and after, the top-down maps (``scores.png``, ``placement.png``, ``gain_first.png``: one
+panel per storey), a checklist, and every tag in placement order with its installer views
+(:mod:`markerplace.report.installer`) and a caption measured on the model
+(:mod:`markerplace.report.captions`: storey, wall and facing, height above the local floor,
+distance along the wall to the nearest corner or opening edge, tag id, printed size).
+
+Positions shown are in the user's frame (the model file's coordinates, z up, metres); the
+directions follow the convention of :mod:`markerplace.report.captions` (+x east, +y north),
+which the page states.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .html import esc, img, jpeg_uri, png_file_uri, table, write_page
+
+log = logging.getLogger(__name__)
+
+__all__ = ["write_plan_report"]
+
+CONVENTION = ("Directions name the model's axes like a map seen from above: <b>+x = east, +y = north</b> "
+              "(-x west, -y south; the model's +y, not magnetic north; up on the maps above). A tag "
+              "<i>faces</i> the way its printed side looks (its wall normal, towards the room) and hangs "
+              "<i>on</i> the wall on the opposite side: a tag that faces west is on the east wall. "
+              "Left and right are as seen standing in front of the tag, looking at it. Heights are of the "
+              "tag centre (the middle of the black square) above the floor in front of it; distances run "
+              "along the wall at that height from the tag centre to the nearest corner (the next wall or "
+              "something standing against it) or the wall's edge (a door or opening, an outside corner), "
+              "measured with rays on the model; a picture or panel on the wall does not end it. Coordinates are the model's, in metres, z up.")
+
+
+def _storey_of(z: float, storeys: np.ndarray, height: float) -> int:
+    """Index of the storey whose eye level (floor + ``height``) is nearest to ``z``."""
+    return int(np.argmin(np.abs(np.asarray(storeys) + height - z)))
+
+
+def _scene_section(doc: dict, num_markers: int) -> str:
+    s = doc.get("summary", {})
+    disc = s.get("discretization", {})
+    per = disc.get("per_storey", [])
+    rows = [[f"storey {p['storey']}", p["floor_z"], p["open_floor_m2"], p["free_m2"], p["locations"],
+             p["candidates"], len(p.get("unreached", []))] for p in per]
+    total = [["all planned", "", sum(p["open_floor_m2"] for p in per), sum(p["free_m2"] for p in per),
+              sum(p["locations"] for p in per), sum(p["candidates"] for p in per),
+              sum(len(p.get("unreached", [])) for p in per)]] if len(per) > 1 else []
+    removed = disc.get("candidates_removed", {})
+    yaws = s.get("num_poses", 0) // max(s.get("num_locations", 1), 1)
+    facts = [
+        ["scene", doc.get("scene", "?")],
+        ["method", doc.get("method", "?")],
+        ["markers placed", num_markers],
+        ["storeys found (floor heights, m)", ", ".join(f"{z:.2f}" for z in s.get("storeys", [])) or "?"],
+        ["storeys planned", ", ".join(str(v) for v in s.get("planned_storeys", []))],
+        ["camera poses", f"{s.get('num_poses', 0)} ({s.get('num_locations', 0)} locations x {yaws} yaws)"],
+        ["wall spots found", disc.get("wall_spots", "?")],
+        ["removed: on glass / tag does not fit flat / seen by no camera",
+         f"{removed.get('glass', 0)} / {removed.get('does not fit', 0)} / {removed.get('not seen', 0)}"],
+        ["candidate spots competing", s.get("num_candidates", "?")],
+    ]
+    unreached = [f"storey {p['storey']}: {u['area_m2']:.1f} m^2 around ({u['centre'][0]:.1f}, {u['centre'][1]:.1f})"
+                 for p in per for u in p.get("unreached", [])]
+    note = ("<p class=\"note\">Floor regions without cameras (reached only through a gap narrower than a person, "
+            f"or not connected): {esc('; '.join(unreached))}</p>") if unreached else ""
+    return ("<h2>Scene</h2>" + table(None, facts) +
+            table(["storey", "floor (m)", "open floor (m^2)", "free (m^2)", "camera locations", "candidate spots",
+                   "regions without cameras"], rows + total) + note)
+
+
+def _scores_section(s: dict) -> str:
+    rows = [["mean", s["mean_score_before"], s["mean_score_after"], s["mean_score_after"] - s["mean_score_before"]],
+            ["10th percentile", s["p10_score_before"], s["p10_score_after"],
+             s["p10_score_after"] - s["p10_score_before"]]]
+    return ("<h2>Scores before and after</h2><p class=\"note\">Localizability score of a camera pose: the negative "
+            "entropy of its pose posterior (nats; higher is better), over every feasible pose. The 10th "
+            "percentile is what the worst-served places get.</p>"
+            + table(["score over camera poses", "no markers", "with the plan", "change"], rows))
+
+
+def _maps_section(out_dir: Path) -> str:
+    figs = [("placement.png", "The plan: numbered tags (arrows point where each tag faces) over the scores "
+             "after placement; one panel per storey."),
+            ("scores.png", "Scores without markers (dark = low); blue ticks are candidate spots."),
+            ("gain_first.png", "Information gain of the first tag (dark = high).")]
+    parts = [img(png_file_uri(out_dir / name), name, text) for name, text in figs if (out_dir / name).is_file()]
+    return "<h2>Maps</h2>" + "".join(parts)
+
+
+def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_offset=None) -> Path:
+    """Write ``report.html`` into a plan's run folder and return its path.
+
+    Args:
+        out_dir: the run folder holding ``placement.json`` and the figures.
+        scene: the scene in its internal frame (rendered and ray cast).
+        disc: the run's :class:`~markerplace.plan.discretization.Discretization` (internal
+            frame): storeys and occupancy (where the installer camera may stand).
+        height: eye level above the local floor (``--height``), metres.
+        world_offset: (3,) user-frame offset of the internal frame (``p_internal = p_user -
+            offset``, :mod:`markerplace.scene.worldframe`); None = not shifted.
+    """
+    from ..markers import load_markers
+    from ..scene.raycast import RayCaster
+    from ..scene.worldframe import markers_to_internal
+    from .captions import describe_tag
+    from .installer import render_installer_views
+
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    doc = json.loads((out_dir / "placement.json").read_text())
+    records = doc.get("markers", [])
+    offset = np.zeros(3) if world_offset is None else np.asarray(world_offset, float)
+    markers = markers_to_internal(load_markers(out_dir / "placement.json"), offset)
+    caster = RayCaster(*scene.geometry())
+    storeys = np.asarray(disc.storeys, float)
+    planned = [int(v) for v in disc.planned_storeys]
+    tag_storey = [_storey_of(float(m.position[2]), storeys, height) for m in markers]
+    places = [describe_tag(caster, m.position, m.normal, float(storeys[s])) for m, s in zip(markers, tag_storey)]
+
+    def occupancy_of(i: int):
+        s = tag_storey[i]
+        return disc.occupancy[planned.index(s)] if s in planned else None
+
+    labels = [f"#{r['order']} id {r['tag_id']}" for r in records]
+    views = render_installer_views(scene, markers, places, caster, occupancy_of, disc.grid_origin,
+                                   disc.grid_resolution, labels) if markers else []
+
+    checklist, cards = [], []
+    for r, place, s, v in zip(records, places, tag_storey, views):
+        x, y, z = r["position"]
+        checklist.append([r["order"], r["tag_id"], f"{s} (floor {storeys[s]:.2f} m)", place.wall, place.facing,
+                          round(place.height, 2), place.distance_words()])
+        sheet = f"tags/{r['order']:02d}_tag{r['tag_id']}.svg"
+        items = [
+            f"Storey <b>{s}</b> (floor at {storeys[s]:.2f} m), on the <b>{esc(place.wall)} wall</b>: "
+            f"the tag faces <b>{esc(place.facing)}</b>.",
+            f"Centre <b>{place.height:.2f} m</b> above the floor in front of it.",
+            f"Centre <b>{esc(place.distance_words())}</b> (as you face the wall).",
+            f"Tag {esc(r['family'])} id <b>{r['tag_id']}</b>, black square <b>{1000 * r['size']:.0f} mm</b>; "
+            f"print sheet <code>{esc(sheet)}</code>; hang it caption side down.",
+            f"Model coordinates of the centre: ({x:.2f}, {y:.2f}, {z:.2f}) m.",
+        ]
+        cards.append(
+            f'<div class="tag" id="tag{r["order"]}"><h3>#{r["order"]}: tag id {r["tag_id"]}</h3>'
+            f'<ul class="caption">{"".join(f"<li>{t}</li>" for t in items)}</ul><div class="views">'
+            + img(jpeg_uri(v.close), f"tag {r['order']} close view",
+                  f"Standing {v.close_distance:.1f} m in front of the spot at eye level; the tag is outlined.")
+            + img(jpeg_uri(v.wide), f"tag {r['order']} wide view",
+                  f"The same wall from {v.wide_distance:.1f} m: orange lines measure the distance along the wall "
+                  "and the height above the floor.")
+            + "</div></div>")
+
+    title = f"Marker plan: {doc.get('scene', '?')}"
+    body = [f"<h1>{esc(title)}</h1>",
+            f"<p>{len(records)} AprilTags ({esc(doc.get('method', '?'))}) in placement order: hang #1 first; "
+            "each earlier tag helps most. Generated by markerplace from <code>placement.json</code>.</p>",
+            _scene_section(doc, len(records)), _scores_section(doc["summary"]), _maps_section(out_dir),
+            "<h2>Tags</h2>", f"<p class=\"note\">{CONVENTION}</p>",
+            table(["#", "tag id", "storey", "wall", "faces", "centre height (m)", "along the wall"], checklist),
+            *cards]
+    path = write_page(out_dir / "report.html", title, "\n".join(body))
+    log.info("report.html: %d tags, %.1f s", len(records), time.perf_counter() - t0)
+    return path
