@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's demo (run by `make demo` after set-up): look at a built-in scene, plan markers
 # with OMP, plan on a scan-like mesh, and prove on a short simulation that the markers help.
-# About 6 minutes on 2 cores.
+# About 6 minutes on 2 cores. Ends by printing the path of the plan's report.html.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MP=.venv/bin/markerplace
@@ -21,7 +21,7 @@ echo "wrote $OUT/office_view{1,2,3}_rgb.png (and _depth.npy, _normal.png)"
 echo "== OMP plan: 10 markers in '$SCENE'"
 $MP plan "$SCENE" -k 10 --out "$OUT/plan_$SCENE"
 $MP render "$SCENE" --markers "$OUT/plan_$SCENE/placement.json" --out "$OUT/${SCENE}_with_markers" >/dev/null
-echo "see $OUT/plan_$SCENE/placement.png (map), placement.csv (where to put each tag)"
+echo "see $OUT/plan_$SCENE/report.html (open it in a browser: maps, and each tag with the view an installer has), placement.csv"
 
 echo "== a scan-like mesh: a simulated RGB-D walk through 'tiny', fused, then planned on"
 $MP --quiet scene export tiny "$OUT/tiny_scan.ply" --as-scan
@@ -31,6 +31,7 @@ echo "see $OUT/plan_tiny_scan/placement.png (planned on the fused scan, not the 
 if [ "${DEMO_SKIP_EVAL:-0}" != "1" ]; then
   echo "== short evaluation: OMP vs no markers vs one random and one uniform placement"
   $MP evaluate "$SCENE" --out "$OUT/eval_$SCENE" --tests 300 --test-sets weighted --runs 1 --k 5,10
-  echo "see $OUT/eval_$SCENE/tables.md, recall.csv, recall_vs_k.png"
+  echo "see $OUT/eval_$SCENE/report.html (recall tables, recall vs k, test images the plan fixes and breaks), tables.md"
 fi
-echo "demo outputs are in $OUT"
+echo "demo outputs are in $OUT; the plan of '$SCENE', for the people who hang the tags:"
+realpath "$OUT/plan_$SCENE/report.html"
