@@ -103,7 +103,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
                                  method=config.placement.method, scene_source=args.scene, existing=existing,
-                                 world_offset=offset)
+                                 world_offset=offset, paper=args.paper,
+                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed})
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
@@ -111,7 +112,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..report.plan_report import write_plan_report
 
     report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
-    print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, scores.npz, scores.png, gain_first.png, placement.png, config.json")
+    print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     print(f"wrote {report}")
     return 0
 
@@ -155,6 +156,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
                         help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
+    from ..report.pdf import PAPER_CHOICES
+
+    p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
+                        help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "
+                             "none = one page per tag at its own size (default a4)")
     add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
@@ -165,6 +171,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .scan import add_scan_parsers
 
     add_scan_parsers(sub, p_export)  # `fuse` and `scene export ... --as-scan`
+
+    from .check import add_check_parser
+    from .export import add_export_parser
+
+    add_export_parser(sub)  # `export PLAN_DIR --gltf OUT.glb`
+    add_check_parser(sub)  # `check PLAN_DIR --installed FILE.json`
 
     return parser
 

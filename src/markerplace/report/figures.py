@@ -53,7 +53,7 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
               markers_normal: np.ndarray | None = None, marker_labels: Sequence[str] | None = None,
               candidates_xy: np.ndarray | None = None, panel_titles: Sequence[str] | None = None,
               location_panel: np.ndarray | None = None, marker_panel: np.ndarray | None = None,
-              candidate_panel: np.ndarray | None = None) -> None:
+              candidate_panel: np.ndarray | None = None, value_range: tuple[float, float] | None = None) -> None:
     """Write a top-down map as PNG, one panel per storey.
 
     Args:
@@ -71,6 +71,7 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
         panel_titles: (S,) one title per panel (e.g. "storey 1, floor 3.00 m").
         location_panel / marker_panel / candidate_panel: panel index of each location, marker
             and candidate (default: all on panel 0).
+        value_range: (lo, hi) the colour scale must include (default: the values' range).
     """
     occ = np.asarray(occupancy)
     if occ.ndim == 2:
@@ -85,6 +86,8 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
     rows = int(np.ceil(S / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(8 * cols, 6.5 * rows), dpi=110, squeeze=False)
     vmin, vmax = (float(np.min(values)), float(np.max(values))) if len(values) else (0.0, 1.0)
+    if value_range is not None:  # a fixed scale (e.g. 0 = nothing lost), widened to hold every value
+        vmin, vmax = min(vmin, value_range[0]), max(vmax, value_range[1])
     sc = None
     for k in range(rows * cols):
         ax = axes.flat[k]

@@ -59,8 +59,14 @@ def write_placement(out_dir: Path, placement, method: str, scene_source: str, ex
 
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
-                       scene_source: str, existing: Sequence = (), world_offset=None) -> dict:
+                       scene_source: str, existing: Sequence = (), world_offset=None, paper: str = "a4",
+                       scene_options: dict | None = None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
+
+    ``paper`` sets tags.pdf's paper (:mod:`markerplace.report.pdf`); ``scene_options`` (``up``,
+    ``unit_scale``, ``seed`` of the scene argument) go into config.json with the existing markers,
+    so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
+    (:mod:`markerplace.report.deliverables`).
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -95,10 +101,15 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "discretization": disc.summary,
     }
     write_placement(out_dir, placement, method, scene_source, {"summary": summary})
+    from .deliverables import write_deliverables
+
+    write_deliverables(out_dir, placement_records(placement, method), placement.markers, existing, disc, scene_source,
+                       scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
-    write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config)})
+    write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config), "scene_options": scene_options or {},
+                                         "existing_markers": [m.to_json() for m in existing]})
 
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
     eye = disc.storeys[disc.planned_storeys] + config.discretize.height

@@ -46,7 +46,8 @@ class _GlbBuilder:
             "materials": [],
             "textures": [],
             "images": [],
-            "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
+            "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497},
+                         {"magFilter": 9728, "minFilter": 9728, "wrapS": 33071, "wrapT": 33071}],
             "accessors": [],
             "bufferViews": [],
             "buffers": [],
@@ -80,8 +81,9 @@ class _GlbBuilder:
         self.tree["accessors"].append(acc)
         return len(self.tree["accessors"]) - 1
 
-    def image(self, texture: np.ndarray) -> int:
-        """Texture index of an (H, W, 3) uint8 array; one PNG per distinct array object."""
+    def image(self, texture: np.ndarray, nearest: bool = False) -> int:
+        """Texture index of an (H, W, 3) uint8 array; one PNG per distinct array object.
+        ``nearest``: sampled without filtering (crisp tag modules at any distance)."""
         from PIL import Image
 
         key = id(texture)
@@ -89,11 +91,12 @@ class _GlbBuilder:
             buf = io.BytesIO()
             Image.fromarray(np.ascontiguousarray(texture, dtype=np.uint8)).save(buf, format="PNG")
             self.tree["images"].append({"bufferView": self.view(buf.getvalue()), "mimeType": "image/png"})
-            self.tree["textures"].append({"sampler": 0, "source": len(self.tree["images"]) - 1})
+            self.tree["textures"].append({"sampler": int(nearest), "source": len(self.tree["images"]) - 1})
             self._images[key] = len(self.tree["textures"]) - 1
         return self._images[key]
 
-    def material(self, name: str, base_color, texture: np.ndarray | None, transparent: bool = False) -> int:
+    def material(self, name: str, base_color, texture: np.ndarray | None, transparent: bool = False,
+                 nearest: bool = False) -> int:
         """Material index for a base colour, texture and transparency (one material per distinct key)."""
         color = tuple(float(c) for c in base_color)
         if transparent:
@@ -102,7 +105,7 @@ class _GlbBuilder:
         if key not in self._materials:
             pbr: dict = {"baseColorFactor": list(color), "metallicFactor": 0.0, "roughnessFactor": 1.0}
             if texture is not None:
-                pbr["baseColorTexture"] = {"index": self.image(texture)}
+                pbr["baseColorTexture"] = {"index": self.image(texture, nearest)}
             material = {"name": name, "pbrMetallicRoughness": pbr}
             if transparent:
                 material["alphaMode"] = "BLEND"
@@ -130,14 +133,35 @@ class _GlbBuilder:
         )
 
 
-def scene_to_glb_bytes(scene: Scene) -> bytes:
-    """Encode ``scene`` as GLB bytes (y-up, metres, one mesh + node per part)."""
+def scene_to_glb_bytes(scene: Scene, data_from_world: np.ndarray | None = None, roots: list | None = None,
+                       nearest_parts: frozenset = frozenset()) -> bytes:
+    """Encode ``scene`` as GLB bytes, one mesh + node per part.
+
+    Args:
+        scene: parts in the world frame (z up, metres).
+        data_from_world: (3, 3) linear map (rotation times a positive scale) from world to the
+            stored vertex data; default :data:`GLTF_FROM_WORLD` (y-up metres). Normals get its
+            rotation.
+        roots: node dicts (``name`` with ``matrix`` (16 numbers, column-major) or
+            ``translation``) nested in order, the parts' nodes under the last; default none: the
+            part nodes are the scene's roots.
+        nearest_parts: names of parts whose textures are sampled without filtering.
+    """
+    A = GLTF_FROM_WORLD if data_from_world is None else np.asarray(data_from_world, dtype=np.float64)
+    N = np.linalg.inv(A).T
     b = _GlbBuilder()
+    parent = None
+    for root in roots or []:
+        b.tree["nodes"].append({**root, "children": []})
+        index = len(b.tree["nodes"]) - 1
+        (b.tree["scenes"][0]["nodes"] if parent is None else b.tree["nodes"][parent]["children"]).append(index)
+        parent = index
     for part in scene.parts:
-        v = np.asarray(part.vertices, dtype=np.float64) @ GLTF_FROM_WORLD.T
+        v = np.asarray(part.vertices, dtype=np.float64) @ A.T
         attrs = {"POSITION": b.accessor(v.astype(np.float32), _FLOAT, "VEC3", _ARRAY_BUFFER, bounds=True)}
         if part.normals is not None:
-            n = np.asarray(part.normals, dtype=np.float64) @ GLTF_FROM_WORLD.T
+            n = np.asarray(part.normals, dtype=np.float64) @ N.T
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
             attrs["NORMAL"] = b.accessor(n.astype(np.float32), _FLOAT, "VEC3", _ARRAY_BUFFER)
         texture = part.texture if (part.texture is not None and part.uv is not None) else None
         if texture is not None:
@@ -150,12 +174,13 @@ def scene_to_glb_bytes(scene: Scene) -> bytes:
         prim = {
             "attributes": attrs,
             "indices": b.accessor(indices, _UINT, "SCALAR", _ELEMENT_ARRAY_BUFFER),
-            "material": b.material(part.name, part.base_color, texture, part.transparent),
+            "material": b.material(part.name, part.base_color, texture, part.transparent, part.name in nearest_parts),
             "mode": 4,
         }
         b.tree["meshes"].append({"name": part.name, "primitives": [prim]})
         b.tree["nodes"].append({"name": part.name, "mesh": len(b.tree["meshes"]) - 1})
-        b.tree["scenes"][0]["nodes"].append(len(b.tree["nodes"]) - 1)
+        (b.tree["scenes"][0]["nodes"] if parent is None else b.tree["nodes"][parent]["children"]).append(
+            len(b.tree["nodes"]) - 1)
     b.tree["scenes"][0]["name"] = scene.name
     return b.to_bytes()
 

@@ -1,0 +1,46 @@
+"""``markerplace check PLAN_DIR --installed installed.json``: where the tags really went vs the
+plan (:mod:`markerplace.report.check_report`). Registered by :func:`markerplace.cli.main.build_parser`."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import UserError
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from ..report.check_report import run_check
+
+    if not 0.05 <= args.match_radius <= 20:
+        raise UserError(f"--match-radius {args.match_radius:g} m is out of range: give 0.05-20 metres")
+    if not 1 <= args.workers <= 256:
+        raise UserError(f"--workers {args.workers} is out of range: give 1-256 processes")
+    _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, workers=args.workers,
+                        progress=not args.quiet)
+    print(text)
+    return 0
+
+
+def add_check_parser(sub) -> argparse.ArgumentParser:
+    """Add ``check`` to the CLI's subparsers."""
+    from ..plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
+
+    p = sub.add_parser(
+        "check", help="compare the tags as installed (measured) with a plan: shifts, score lost, where it hurts",
+        description="After the tags went up, give their measured poses (--installed: placement.json's format, or a "
+                    "list of {tag_id, position, normal[, size]} in the plan's coordinates, metres). Per planned "
+                    f"tag: what was found at its spot (as planned within {100 * TOLERANCE_M:.0f} cm and "
+                    f"{TOLERANCE_DEG:.0f} deg, shifted, wrong id, swapped, missing; extra tags too), the shift in "
+                    "metres and degrees and the localizability score lost; then the camera locations that lost "
+                    "most. The plan's cached stages are reused; only depth at the poses that see an installed tag "
+                    "is rendered.")
+    p.add_argument("plan_dir", metavar="PLAN_DIR", help="the --out folder of a `markerplace plan` run")
+    p.add_argument("--installed", required=True, metavar="FILE.json", help="measured tags (see above)")
+    p.add_argument("--out", default=None, help="output folder (default PLAN_DIR/check)")
+    p.add_argument("--match-radius", type=float, default=MATCH_RADIUS_M,
+                   help=f"an installed tag farther than this from a planned spot is not that spot's tag, metres "
+                        f"(default {MATCH_RADIUS_M:g})")
+    p.add_argument("--workers", type=int, default=1, help="processes for the depth renders (default 1: this process)")
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
+    p.set_defaults(func=cmd_check)
+    return p

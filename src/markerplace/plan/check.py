@@ -1,0 +1,231 @@
+"""Installed is not planned: compare the tags a person measured on the walls with the plan.
+
+The plan folder's cached stages are reused (:func:`~markerplace.plan.planner.prepare` with the
+run's configuration and ``--existing`` markers: nothing is rendered again when they match). The
+installed tags' coverages are computed by the same code as ``--existing`` markers and
+candidates: geometric visibility (:func:`~markerplace.plan.planner.geometric_visibility`),
+occlusion from a marker-free depth render at each pose that could see one
+(:meth:`~markerplace.imaging.engine.ImagingEngine.unoccluded`), information from the run's
+marker model (:func:`~markerplace.plan.planner.build_coverages`). A tag installed exactly as
+planned therefore loses nothing.
+
+Pairing planned spots with installed tags (all in the internal frame, metres):
+
+1. a planned tag whose id is installed within ``radius`` of its spot is that tag (``as planned``
+   when within ``tolerance_m`` and ``tolerance_deg``, else ``shifted``);
+2. the remaining spots and installed tags are paired by least total distance (Hungarian) within
+   ``radius`` and with normals less than 90 degrees apart: a different id at the spot is a
+   ``wrong id`` (``swapped`` when the two ids sit on each other's spots);
+3. spots left are ``missing``; installed tags left are ``extra``.
+
+Scores are the localizability -H (nats) per pose: with the existing and planned markers vs the
+existing and installed ones. Per planned spot, ``score_lost`` is the drop of the mean score over
+all poses when only that spot's tag is replaced by what was installed there (removed when
+missing); the per-spot losses need not add up to the total (markers interact).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import UserError
+from .localizability import entropy
+from .placement import MarkerCoverage, apply_coverages
+
+log = logging.getLogger(__name__)
+
+__all__ = ["CheckResult", "TagRow", "compare", "installed_coverages", "pair_markers"]
+
+MATCH_RADIUS_M = 1.5
+TOLERANCE_M = 0.05
+TOLERANCE_DEG = 5.0
+
+
+@dataclass
+class TagRow:
+    """One planned spot (``order`` >= 1) or one extra installed tag (``order`` = 0).
+
+    Attributes:
+        order, planned_id: placement order and tag id of the spot (None for extras).
+        installed_id: id of the tag found at the spot (None when missing).
+        status: ``as planned``, ``shifted``, ``wrong id``, ``swapped``, ``missing`` or ``extra``.
+        shift_m, shift_deg: distance between the planned and installed centres (metres) and the
+            angle between their normals (degrees); None when missing.
+        score_lost: mean score drop over all poses from this spot alone (nats; negative = gain).
+        score_lost_seen: the same over the poses that see the planned tag.
+        planned, installed: (4, 4) ``world_from_marker`` (internal frame) or None.
+        note: what to do, in words.
+    """
+
+    order: int
+    planned_id: int | None
+    installed_id: int | None
+    status: str
+    shift_m: float | None
+    shift_deg: float | None
+    score_lost: float = 0.0
+    score_lost_seen: float = 0.0
+    planned: np.ndarray | None = None
+    installed: np.ndarray | None = None
+    note: str = ""
+
+
+@dataclass
+class CheckResult:
+    """Everything ``check`` reports (internal frame; the writer moves positions to the user's).
+
+    Attributes:
+        rows: per planned spot in placement order, then extras.
+        score_planned, score_installed: (N,) per-pose score with the planned / installed tags.
+        base_score: (N,) from the scene's features alone (no marker at all).
+        disc: the plan's discretization (poses, locations, storeys).
+    """
+
+    rows: list
+    score_planned: np.ndarray
+    score_installed: np.ndarray
+    base_score: np.ndarray
+    disc: object
+    extra: dict = field(default_factory=dict)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    c = float(np.clip(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
+    return float(np.degrees(np.arccos(c)))
+
+
+def pair_markers(planned: Sequence, installed: Sequence, radius: float = MATCH_RADIUS_M) -> dict[int, int]:
+    """{planned index: installed index} by the rules of the module docstring (steps 1-2)."""
+    from scipy.optimize import linear_sum_assignment
+
+    P = np.array([m.position for m in planned]).reshape(-1, 3)
+    Q = np.array([m.position for m in installed]).reshape(-1, 3)
+    pairs: dict[int, int] = {}
+    by_id = {int(m.tag_id): j for j, m in enumerate(installed)}
+    for i, m in enumerate(planned):
+        j = by_id.get(int(m.tag_id))
+        if j is not None and np.linalg.norm(P[i] - Q[j]) <= radius and j not in pairs.values():
+            pairs[i] = j
+    rest_p = [i for i in range(len(planned)) if i not in pairs]
+    rest_q = [j for j in range(len(installed)) if j not in pairs.values()]
+    if rest_p and rest_q:
+        D = np.linalg.norm(P[rest_p][:, None] - Q[rest_q][None], axis=2)
+        facing = np.array([[np.dot(planned[i].normal, installed[j].normal) > 0 for j in rest_q] for i in rest_p])
+        cost = np.where((D <= radius) & facing, D, 1e6)
+        for a, b in zip(*linear_sum_assignment(cost)):
+            if cost[a, b] < 1e6:
+                pairs[rest_p[a]] = rest_q[b]
+    return pairs
+
+
+def _occlusion_task(engine, item) -> np.ndarray:
+    world_from_cam, mask = item
+    return engine.unoccluded(engine.render(world_from_cam, rgb=False), "installed", mask)
+
+
+def installed_coverages(scene_spec, world_from_cam: np.ndarray, markers: Sequence, config, executor) -> list:
+    """One :class:`MarkerCoverage` per marker (internal frame) over the plan's poses, computed as
+    ``prepare`` computes them for ``--existing`` markers (see module docstring); renders depth
+    only at the poses that could see one of them."""
+    from ..imaging.engine import EngineSpec, imaging_job
+    from ..imaging.visibility import marker_points
+    from .planner import build_coverages, geometric_visibility
+
+    if not markers:
+        return []
+    T = np.array([m.world_from_marker for m in markers], dtype=float)
+    sizes = np.array([m.size for m in markers], dtype=float)
+    in_view = geometric_visibility(world_from_cam, T, config)
+    todo = np.flatnonzero(in_view.any(axis=1))
+    unoccluded = np.zeros_like(in_view)
+    job = imaging_job(EngineSpec(scene_spec, config.imaging, {"installed": marker_points(T, sizes)}))
+    items = [(world_from_cam[i], in_view[i]) for i in todo]
+    for j, visible in executor.map(_occlusion_task, items, job):
+        unoccluded[todo[j]] = visible
+    return build_coverages(world_from_cam, T, list(sizes), in_view & unoccluded, config)
+
+
+def _scores_with(info: np.ndarray, score: np.ndarray, remove: Sequence[MarkerCoverage],
+                 add: Sequence[MarkerCoverage]) -> np.ndarray:
+    """(N,) scores after removing and adding coverages to ``info`` (only touched poses recomputed)."""
+    touched = [c.pose_idx for c in (*remove, *add)]
+    idx = np.unique(np.concatenate(touched)) if touched else np.zeros(0, np.int64)
+    out = score.copy()
+    if len(idx):
+        sub = info[idx].copy()
+        for c in remove:
+            np.subtract.at(sub, np.searchsorted(idx, c.pose_idx), c.info)
+        for c in add:
+            np.add.at(sub, np.searchsorted(idx, c.pose_idx), c.info)
+        out[idx] = -entropy(sub)
+    return out
+
+
+def _status(planned, inst, tol_m: float, tol_deg: float) -> tuple[str, float, float]:
+    shift = float(np.linalg.norm(inst.position - planned.position))
+    angle = _angle_deg(inst.normal, planned.normal)
+    if int(inst.tag_id) != int(planned.tag_id):
+        return "wrong id", shift, angle
+    return ("as planned" if shift <= tol_m and angle <= tol_deg else "shifted"), shift, angle
+
+
+def compare(data, planned: Sequence, planned_candidates: Sequence[int], installed: Sequence,
+            installed_covs: Sequence[MarkerCoverage], *, radius: float = MATCH_RADIUS_M,
+            tol_m: float = TOLERANCE_M, tol_deg: float = TOLERANCE_DEG) -> CheckResult:
+    """Pair, score and explain (see module docstring).
+
+    Args:
+        data: :class:`~markerplace.plan.planner.PlanData` of the plan (its existing markers' coverages
+            after the candidates).
+        planned: placed markers (internal frame), placement order.
+        planned_candidates: their candidate indices into ``data.coverages``.
+        installed: measured markers (internal frame); ``installed_covs`` their coverages.
+    """
+    if len(planned_candidates) != len(planned):
+        raise UserError("placement.json lists markers without a candidate index: re-run `markerplace plan`")
+    existing_covs = list(data.coverages[data.num_candidates:])
+    planned_covs = [data.coverages[int(c)] for c in planned_candidates]
+    info_planned = apply_coverages(data.base_info, existing_covs + planned_covs)
+    score_planned = -entropy(info_planned)
+    info_installed = apply_coverages(data.base_info, existing_covs + list(installed_covs))
+    score_installed = -entropy(info_installed)
+    pairs = pair_markers(planned, installed, radius)
+    spot_of_id = {int(planned[i].tag_id): int(installed[j].tag_id) for i, j in pairs.items()}
+    rows = []
+    mean_planned = float(score_planned.mean())
+    for i, m in enumerate(planned):
+        j = pairs.get(i)
+        add = [] if j is None else [installed_covs[j]]
+        s = _scores_with(info_planned, score_planned, [planned_covs[i]], add)
+        seen = planned_covs[i].pose_idx
+        lost_seen = float((score_planned[seen] - s[seen]).mean()) if len(seen) else 0.0
+        if j is None:
+            status, shift, angle, iid = "missing", None, None, None
+            note = f"tag {m.tag_id} not found within {radius:g} m of its spot: hang it"
+        else:
+            status, shift, angle = _status(m, installed[j], tol_m, tol_deg)
+            iid = int(installed[j].tag_id)
+            note = {"as planned": "ok", "shifted": f"move it {shift:.2f} m back to its spot" + (
+                f" and turn it {angle:.0f} deg" if angle > tol_deg else "")}.get(status, "")
+            if status == "wrong id":
+                if spot_of_id.get(iid) == int(m.tag_id):
+                    status = "swapped"
+                    note = f"tags {m.tag_id} and {iid} are swapped: exchange the prints or use the installed tag maps"
+                else:
+                    note = f"tag {iid} hangs here instead of {m.tag_id}: replace it or use the installed tag maps"
+        rows.append(TagRow(i + 1, int(m.tag_id), iid, status, shift, angle, mean_planned - float(s.mean()), lost_seen,
+                           np.asarray(m.world_from_marker, float), None if j is None else
+                           np.asarray(installed[j].world_from_marker, float), note))
+    paired = set(pairs.values())
+    for j, inst in enumerate(installed):
+        if j in paired:
+            continue
+        s = _scores_with(info_planned, score_planned, [], [installed_covs[j]])
+        rows.append(TagRow(0, None, int(inst.tag_id), "extra", None, None, mean_planned - float(s.mean()), 0.0, None,
+                           np.asarray(inst.world_from_marker, float),
+                           f"tag {inst.tag_id} is not near any planned spot (it still helps; keep it in the tag map)"))
+    return CheckResult(rows, score_planned, score_installed, data.base_score, data.disc)

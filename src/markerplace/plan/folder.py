@@ -1,0 +1,129 @@
+"""A finished plan run folder read back: its scene, configuration and markers.
+
+``plan`` leaves ``config.json`` (the resolved :class:`~markerplace.plan.planner.PlanConfig`, the
+scene argument, ``scene_options`` = ``up``/``unit_scale``/``seed`` and the ``--existing``
+markers) and ``placement.json`` (the placed markers) in its folder; ``export`` and ``check``
+rebuild the run from them. Positions in both files are in the user's frame (z up, metres, the
+file's coordinates; :mod:`markerplace.scene.worldframe`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
+from pathlib import Path
+
+from ..errors import UserError
+from ..markers import Marker, marker_from_json
+from ..scene.spec import SceneSpec
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PlanFolder", "read_plan_folder", "config_from_dict"]
+
+
+def _tuples(v):
+    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+
+
+def config_from_dict(cls, d: dict):
+    """Rebuild the frozen dataclass ``cls`` (nested configs included) from its
+    :func:`~markerplace.runtime.cache.config_dict`; keys it does not know are ignored, missing
+    ones keep their defaults, JSON lists become tuples."""
+    kwargs = {}
+    for f in fields(cls):
+        if f.name not in d:
+            continue
+        default = f.default if f.default is not MISSING else (
+            f.default_factory() if f.default_factory is not MISSING else None)
+        value = d[f.name]
+        if is_dataclass(default) and isinstance(value, dict):
+            value = config_from_dict(type(default), value)
+        kwargs[f.name] = _tuples(value)
+    return cls(**kwargs)
+
+
+@dataclass(frozen=True, eq=False)
+class PlanFolder:
+    """A plan run folder.
+
+    Attributes:
+        path: the folder.
+        scene: the scene argument of the run (built-in name or mesh path).
+        scene_options: ``up``, ``unit_scale``, ``seed`` of the scene argument ({} for folders
+            made before they were recorded).
+        config: the run's :class:`~markerplace.plan.planner.PlanConfig` (``start`` in the user frame).
+        markers: placed markers in placement order, user frame (poses rounded to 1e-6 as
+            placement.json stores them).
+        records: placement.json's marker records.
+        existing: the run's ``--existing`` markers, user frame.
+    """
+
+    path: Path
+    scene: str
+    scene_options: dict
+    config: object
+    markers: list
+    records: list
+    existing: list
+
+    @property
+    def spec(self) -> SceneSpec:
+        """How to load the run's scene."""
+        o = self.scene_options
+        return SceneSpec(self.scene, o.get("up"), o.get("unit_scale"), int(o.get("seed") or 0))
+
+    def config_in_scene_frame(self, offset):
+        """The config with ``discretize.start`` moved into the scene's internal frame (as
+        ``plan`` ran it; ``offset`` from :func:`markerplace.scene.worldframe.world_offset`)."""
+        from ..scene.worldframe import points_to_internal
+
+        start = self.config.discretize.start
+        if start is None or not any(offset):
+            return self.config
+        moved = tuple(float(v) for v in points_to_internal(start, offset))
+        return replace(self.config, discretize=replace(self.config.discretize, start=moved))
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise UserError(f"{path} is not readable JSON ({err.__class__.__name__}): {what}") from None
+    if not isinstance(data, dict):
+        raise UserError(f"{path} is not a JSON object: {what}")
+    return data
+
+
+def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
+    """Read a plan folder. Raises :class:`UserError` (one line) for a missing folder, a folder
+    that is not a finished plan run, or damaged files."""
+    from .planner import PlanConfig
+
+    path = Path(path)
+    if not path.is_dir():
+        raise UserError(f"{option} {str(path)!r} is not a folder: give the --out folder of a `markerplace plan` run")
+    missing = [n for n in ("config.json", "placement.json") if not (path / n).is_file()]
+    if missing:
+        raise UserError(f"{option} {str(path)!r} is not a plan folder: {' and '.join(missing)} missing "
+                        "(run `markerplace plan ... --out` into it first)")
+    rerun = "re-run `markerplace plan` into the folder"
+    config_json = _read_json(path / "config.json", rerun)
+    placement = _read_json(path / "placement.json", rerun)
+    if "scene" not in config_json or not isinstance(placement.get("markers"), list):
+        raise UserError(f"{path} was not written by `markerplace plan` (config.json has no scene or placement.json "
+                        f"no markers): {rerun}")
+    try:
+        config = config_from_dict(PlanConfig, config_json)
+        markers = [marker_from_json(r) for r in placement["markers"]]
+        existing = [marker_from_json(r) for r in config_json.get("existing_markers", [])]
+    except (UserError, TypeError, ValueError, KeyError) as err:
+        raise UserError(f"{path}: config.json or placement.json is damaged ({err}): {rerun}") from None
+    options = config_json.get("scene_options")
+    if options is None:
+        log.warning("%s was made by an older markerplace: its config.json does not record --up, --unit-scale or "
+                    "--seed; assuming the defaults", path)
+        options = {}
+    return PlanFolder(path, str(config_json["scene"]), dict(options), config, markers, list(placement["markers"]),
+                      existing)

@@ -1,0 +1,223 @@
+"""``markerplace check PLAN_DIR --installed installed.json``: run the comparison of
+:mod:`markerplace.plan.check` on a plan folder and write what it found.
+
+Outputs (default folder ``PLAN_DIR/check/``), every position in the user's frame (z up,
+metres, the file's coordinates):
+
+* ``check.json``: summary (mean and 10th-percentile score planned vs installed, nats), one row
+  per planned spot and per extra tag (status, shift in metres and degrees, score lost, what to
+  do), and the camera locations that lost most (storey, floor height, x, y, score drop);
+* ``check.csv``: the per-tag rows as a table;
+* ``check_map.png``: per camera location the score lost (mean over yaws; dark = more lost), the
+  installed tags numbered by id and the planned spots as ticks, one panel per storey;
+* ``tagmaps/``: the known-tag maps of the tags as installed (what the robot should load;
+  :mod:`markerplace.report.tagmaps`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UserError
+from ..io_utils import atomic_path, write_json
+
+log = logging.getLogger(__name__)
+
+__all__ = ["load_installed", "run_check"]
+
+WORST_LOCATIONS = 5
+
+
+def load_installed(path: str | Path, default_size: float) -> list:
+    """Installed markers (user frame) from placement.json's format or a plain list of
+    ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size."""
+    from ..markers import marker_from_json
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"--installed {str(path)!r}: no such file; give the JSON of the measured tags")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise UserError(f"--installed {path} is not valid JSON ({err.__class__.__name__}): fix the file") from None
+    entries = data.get("markers") if isinstance(data, dict) else data
+    if not isinstance(entries, list):
+        raise UserError(f"--installed {path} must hold a list of tags or an object with a 'markers' list")
+    out, seen = [], set()
+    for i, e in enumerate(entries):
+        try:
+            if not isinstance(e, dict):
+                raise UserError("not an object with tag_id, position and normal")
+            m = marker_from_json(e, default_size=default_size)
+        except UserError as err:
+            raise UserError(f"--installed {path}, entry {i}: {err}") from None
+        except (ValueError, TypeError) as err:
+            raise UserError(f"--installed {path}, entry {i}: malformed value ({err}); tag_id is an integer, "
+                            "position and normal 3 numbers each") from None
+        if not np.all(np.isfinite(m.world_from_marker)) or np.linalg.norm(m.normal) < 1e-9:
+            raise UserError(f"--installed {path}, entry {i}: tag {m.tag_id} has a non-finite position or a zero normal")
+        if m.tag_id in seen:
+            raise UserError(f"--installed {path}: tag id {m.tag_id} is listed twice; each printed tag hangs once")
+        seen.add(m.tag_id)
+        out.append(m)
+    return out
+
+
+def _warn_off_wall(scene, markers) -> None:
+    from ..markers import check_markers_on_walls
+
+    for m in markers:
+        try:
+            check_markers_on_walls(scene, [m], "installed")
+        except UserError as err:
+            log.warning("%s (scored where it was measured)", err)
+
+
+def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
+              radius: float | None = None, workers: int = 1, progress: bool = True) -> tuple[Path, str]:
+    """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
+    (default ``plan_dir/check``). Returns the folder and the text summary printed by the CLI."""
+    from ..plan import check
+    from ..plan.folder import read_plan_folder
+    from ..plan.planner import prepare
+    from ..runtime.executor import RuntimeConfig, make_executor
+    from ..scene.worldframe import markers_to_internal, world_offset
+
+    folder = read_plan_folder(plan_dir)
+    installed_user = load_installed(installed_path, folder.config.placement.tag_size)
+    out = Path(out_dir) if out_dir is not None else folder.path / "check"
+    from ..output_checks import check_output_dir
+
+    check_output_dir(out)
+    spec = folder.spec
+    scene = spec.load()
+    offset = world_offset(scene)
+    config = folder.config_in_scene_frame(offset)
+    installed = markers_to_internal(installed_user, offset)
+    _warn_off_wall(scene, installed)
+    existing = markers_to_internal(folder.existing, offset)
+    ex = make_executor(RuntimeConfig(workers=workers))
+    try:
+        data = prepare(spec, config, folder.path, existing=existing, progress=progress, executor=ex)
+        planned = markers_to_internal(folder.markers, offset)
+        cands = [int(r.get("candidate_index", -1)) for r in folder.records]
+        disc_T = data.disc.candidate_world_from_marker
+        for m, c in zip(planned, cands):
+            if not 0 <= c < data.num_candidates or np.abs(disc_T[c] - m.world_from_marker).max() > 1e-4:
+                raise UserError(f"{folder.path}: placement.json does not match the folder's cached stages (tag "
+                                f"{m.tag_id}); re-run `markerplace plan` into it")
+        covs = check.installed_coverages(spec, data.disc.world_from_cam, installed, config, ex)
+    finally:
+        ex.close()
+    planned = [type(m)(m.tag_id, m.size, disc_T[c].copy(), m.family) for m, c in zip(planned, cands)]
+    result = check.compare(data, planned, cands, installed, covs,
+                           radius=check.MATCH_RADIUS_M if radius is None else radius)
+    text = _write(out, result, offset, folder, installed_user)
+    return out, text
+
+
+def _user(T, offset):
+    from ..scene.worldframe import poses_to_user
+
+    return None if T is None else poses_to_user(T, offset)
+
+
+def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
+    from ..scene.worldframe import discretization_to_user
+    from .deliverables import field_extent
+    from .figures import floor_map, per_location_mean
+    from .tagmaps import write_tag_maps
+    from ..scene.source import world_from_file_rotation
+
+    out.mkdir(parents=True, exist_ok=True)
+    disc = discretization_to_user(result.disc, offset)
+    sp, si = result.score_planned, result.score_installed
+    drop = sp - si
+    L = len(disc.locations)
+    loc_drop = per_location_mean(drop, disc.location_index, L)
+    loc_p, loc_i = per_location_mean(sp, disc.location_index, L), per_location_mean(si, disc.location_index, L)
+    worst = [int(l) for l in np.argsort(-loc_drop, kind="stable")[:WORST_LOCATIONS] if loc_drop[l] > 1e-9]
+    rows = []
+    for r in result.rows:
+        P, Q = _user(r.planned, offset), _user(r.installed, offset)
+        rows.append({"order": r.order or None, "planned_id": r.planned_id, "installed_id": r.installed_id,
+                     "status": r.status, "shift_m": r.shift_m, "shift_deg": r.shift_deg,
+                     "score_lost": r.score_lost, "score_lost_seen": r.score_lost_seen,
+                     "planned_position": None if P is None else P[:3, 3].tolist(),
+                     "installed_position": None if Q is None else Q[:3, 3].tolist(),
+                     "installed_normal": None if Q is None else Q[:3, 2].tolist(), "note": r.note})
+    storeys = np.asarray(disc.storeys, float)
+    worst_rows = [{"storey": int(disc.location_storey[l]), "floor_z": float(storeys[disc.location_storey[l]]),
+                   "x": float(disc.locations[l, 0]), "y": float(disc.locations[l, 1]),
+                   "score_planned": float(loc_p[l]), "score_installed": float(loc_i[l]),
+                   "score_lost": float(loc_drop[l])} for l in worst]
+    summary = {"num_poses": int(len(sp)), "mean_score_planned": float(sp.mean()),
+               "mean_score_installed": float(si.mean()), "mean_score_lost": float(drop.mean()),
+               "p10_score_planned": float(np.percentile(sp, 10)), "p10_score_installed": float(np.percentile(si, 10)),
+               "poses_losing_over_1_nat": int((drop > 1.0).sum()),
+               "statuses": {s: sum(r["status"] == s for r in rows) for s in dict.fromkeys(r["status"] for r in rows)}}
+    write_json(out / "check.json", {"plan": str(folder.path), "summary": summary, "tags": rows,
+                                    "worst_locations": worst_rows})
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["order", "planned_id", "installed_id", "status", "shift_m", "shift_deg", "score_lost", "x", "y", "z", "note"])
+    for r in rows:
+        pos = r["installed_position"] or r["planned_position"]
+        w.writerow([r["order"] or "", _s(r["planned_id"]), _s(r["installed_id"]), r["status"], _f(r["shift_m"], 3),
+                    _f(r["shift_deg"], 1), _f(r["score_lost"], 4), *(f"{v:.3f}" for v in pos), r["note"]])
+    with atomic_path(out / "check.csv") as tmp:
+        tmp.write_text(buf.getvalue())
+    slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
+    eye = storeys[disc.planned_storeys] + folder.config.discretize.height
+
+    def panel(z):
+        z = np.asarray(z, float).reshape(-1)
+        return np.argmin(np.abs(z[:, None] - eye[None]), axis=1) if len(z) else np.zeros(0, int)
+
+    inst = np.array([m.position for m in installed_user]).reshape(-1, 3)
+    plan_xyz = np.array([m.position for m in folder.markers]).reshape(-1, 3)
+    floor_map(out / "check_map.png", occupancy=disc.occupancy, origin=disc.grid_origin, resolution=disc.grid_resolution,
+              locations=disc.locations, location_panel=np.array([slots[int(s)] for s in disc.location_storey]),
+              panel_titles=[f"storey {s}: floor {storeys[s]:.2f} m" for s in disc.planned_storeys],
+              values=loc_drop, cmap="gray_r", value_range=(0.0, max(float(loc_drop.max(initial=0.0)), 1e-6)), title="Score lost per camera location, installed vs planned (dark = more lost)",
+              colorbar_label="mean score drop over yaws (nats)",
+              markers_xy=inst[:, :2], markers_normal=np.array([m.normal[:2] for m in installed_user]).reshape(-1, 2),
+              marker_labels=[str(m.tag_id) for m in installed_user], marker_panel=panel(inst[:, 2]),
+              candidates_xy=plan_xyz[:, :2], candidate_panel=panel(plan_xyz[:, 2]))
+    write_tag_maps(out / "tagmaps", list(installed_user) + list(folder.existing), name="installed",
+                   field=field_extent(disc), world_from_file=world_from_file_rotation(folder.scene,
+                                                                                       folder.scene_options.get("up")))
+    return _text(out, summary, rows, worst_rows)
+
+
+def _s(v) -> str:
+    return "" if v is None else str(v)
+
+
+def _f(v, digits: int) -> str:
+    return "" if v is None else f"{v:.{digits}f}"
+
+
+def _text(out: Path, summary: dict, rows: list, worst: list) -> str:
+    lines = [f"{'spot':>4} {'planned':>7} {'found':>5}  {'status':<10} {'shift m':>7} {'deg':>5} {'lost':>7}  what to do"]
+    for r in rows:
+        lines.append(f"{_s(r['order']) or '-':>4} {_s(r['planned_id']) or '-':>7} {_s(r['installed_id']) or '-':>5}  "
+                     f"{r['status']:<10} {_f(r['shift_m'], 2) or '-':>7} {_f(r['shift_deg'], 0) or '-':>5} "
+                     f"{r['score_lost']:>7.3f}  {r['note']}")
+    lines.append(f"score (mean -H over {summary['num_poses']} poses): planned {summary['mean_score_planned']:.3f}, "
+                 f"installed {summary['mean_score_installed']:.3f}, lost {summary['mean_score_lost']:.3f} nats; "
+                 f"10th percentile {summary['p10_score_planned']:.3f} -> {summary['p10_score_installed']:.3f}")
+    if worst:
+        lines.append("camera locations that lost most:")
+        lines += [f"  storey {w['storey']} (floor {w['floor_z']:.2f} m) at ({w['x']:.2f}, {w['y']:.2f}): "
+                  f"{w['score_planned']:.2f} -> {w['score_installed']:.2f} (lost {w['score_lost']:.2f} nats)" for w in worst]
+    else:
+        lines.append("no camera location lost anything")
+    lines.append(f"wrote {out}/check.json, check.csv, check_map.png, tagmaps/ (the tags as installed)")
+    return "\n".join(lines)
