@@ -51,17 +51,17 @@ def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> plann
     return planner.PlanData(disc, base, -entropy(base), covs, C, {})
 
 
-def test_registry_lists_the_three_methods_in_order():
-    assert PLACEMENT_METHODS.names() == ("omp", "random", "uniform")
-    assert [c.label for c in PLACEMENT_METHODS.values()] == ["Ours", "Rand.", "Unif."]
-    assert [c.randomized for c in PLACEMENT_METHODS.values()] == [False, True, True]
+def test_registry_lists_the_four_methods_in_order():
+    assert PLACEMENT_METHODS.names() == ("omp", "random", "uniform", "human")
+    assert [c.label for c in PLACEMENT_METHODS.values()] == ["Ours", "Rand.", "Unif.", "Human"]
+    assert [c.randomized for c in PLACEMENT_METHODS.values()] == [False, True, True, False]
     assert PLACEMENT_METHODS["omp"].nested
 
 
 def test_unknown_method_is_a_one_line_user_error():
     with pytest.raises(UserError) as err:
         get_placement_method("greedy")
-    assert str(err.value) == "--method 'greedy' is not known: use one of omp, random, uniform"
+    assert str(err.value) == "--method 'greedy' is not known: use one of omp, random, uniform, human"
     with pytest.raises(UserError, match="--method 'greedy' is not known"):
         planner.validate(planner.PlanConfig(placement=planner.PlacementConfig(method="greedy")))
     with pytest.raises(UserError, match="--marker-model 'x' is not known: use one of paper, corners"):
@@ -174,7 +174,7 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
                                       "--k", "2,3", "--runs", "2"])
     ecfg = evaluate_config_from_args(args)
     tbconfig.validate_evaluate_config(ecfg)
-    assert placements.method_names() == ("none", "omp", "random", "uniform", "toy", "toyrand")
+    assert placements.method_names() == ("none", "omp", "random", "uniform", "human", "toy", "toyrand")
     assert placements.baseline_methods() == ("random", "uniform", "toyrand")
     assert tbconfig.EvaluateConfig().study.methods == placements.method_names()
     runs = placements.build_placements(data, config.placement, ecfg)
@@ -194,14 +194,16 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
 def test_unknown_evaluate_method_lists_the_registry(toy_methods):
     with pytest.raises(UserError) as err:
         tbconfig.validate_evaluate_config(tbconfig.EvaluateConfig(study=tbconfig.StudyConfig(methods=("none", "best"))))
-    assert "use a comma list of none, omp, random, uniform, toy, toyrand" in str(err.value)
+    assert "use a comma list of none, omp, random, uniform, human, toy, toyrand" in str(err.value)
 
 
 def test_build_placements_order_and_seeds_are_unchanged():
-    """none, omp once at max k (prefixes), then random and uniform per (run, k) with seed + run."""
+    """none, omp once at max k (prefixes), then random and uniform per (run, k) with seed + run
+    (human needs a scene's SIFT points, which the synthetic data has not: tests/test_human_method.py)."""
     data = _data(5)
     pc = planner.PlacementConfig(seed=4)
-    runs = placements.build_placements(data, pc, tbconfig.EvaluateConfig(study=tbconfig.StudyConfig(ks=(2, 4), runs=2)))
+    study = tbconfig.StudyConfig(methods=("none", "omp", "random", "uniform"), ks=(2, 4), runs=2)
+    runs = placements.build_placements(data, pc, tbconfig.EvaluateConfig(study=study))
     assert [(r.method, r.run, r.k) for r in runs] == [("none", 0, 0), ("omp", 0, 2), ("omp", 0, 4)] + [
         (m, run, k) for m in ("random", "uniform") for run in range(2) for k in (2, 4)]
     omp = planner.place(data, replace(pc, k=4, method="omp"), progress=False)

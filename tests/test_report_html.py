@@ -189,7 +189,7 @@ def test_plan_report_in_browser(tmp_path_factory, browser, capsys):
     assert sum("close view" in a for a in alts) == 2 and sum("wide view" in a for a in alts) == 2
     assert "Scores before and after" in page["text"] and "10th percentile" in page["text"]
     assert page["text"].count(" m above the floor in front of it") == 2
-    assert re.search(r"\d\.\d\d m from the (corner|wall's edge)", page["text"])
+    assert re.search(r"\d\.\d\d m from the (corner|edge of its surface) on its (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
 
 

@@ -150,10 +150,11 @@ def test_bad_evaluate_settings_are_user_errors(part, field, value, message):
 def test_find_placement_files(tmp_path):
     (tmp_path / "expert").mkdir()
     (tmp_path / "expert" / "placement.json").write_text(json.dumps({"markers": []}))
-    (tmp_path / "human.json").write_text("[]")
+    (tmp_path / "manual.json").write_text("[]")
+    (tmp_path / "human.json").write_text("[]")  # a built-in method's name: renamed
     (tmp_path / "expert" / "config.json").write_text("{}")
     found = placements.find_placement_files(tmp_path)
-    assert sorted(found) == ["expert", "human"]
+    assert sorted(found) == ["expert", "human-file", "manual"]
 
 
 # --- end to end --------------------------------------------------------------------------------
@@ -174,7 +175,7 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
         assert (out / name).stat().st_size > 0, name
     rows = list(csv.DictReader((out / "recall.csv").open()))
     got = {(r["method"], r["run"], r["k"], r["test_set"], r["threshold"]) for r in rows}
-    expected = {(m, "0", k, ts, th) for m, k in [("none", "0"), ("omp", "2"), ("random", "2"), ("uniform", "2")]
+    expected = {(m, "0", k, ts, th) for m, k in [("none", "0"), ("omp", "2"), ("random", "2"), ("uniform", "2"), ("human", "2")]
                 for ts in ("weighted", "uniform") for th in ("1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg")}
     assert got == expected and len(rows) == len(expected)
     assert all(r["scene"] == "tiny" and r["n_tests"] == "20" and 0.0 <= float(r["recall"]) <= 1.0 for r in rows)
@@ -187,11 +188,12 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     assert "| tiny (" in tables
     assert "## Paired differences at 5cm/5deg" in tables and "| Ours | Rand. (1 run) |" in tables
     errs = np.load(out / "query_errors.npz")
-    assert errs["weighted_t_err"].shape == (4, 20) and errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform"]
+    assert errs["weighted_t_err"].shape == (5, 20)
+    assert errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform", "human"]
     # same test poses for every method: one file per test set, identical on a re-run
     poses = tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
     results = sorted((out / "cache" / "predictions").glob("*.npz"))
-    assert len(results) == 8
+    assert len(results) == 10
     stamps = [p.stat().st_mtime_ns for p in results]
     assert main(args) == 0  # resume: every placement's predictions are reused
     assert [p.stat().st_mtime_ns for p in results] == stamps

@@ -113,6 +113,7 @@ VOXEL = Bound("--voxel", 0.001, 1.0, "m", "a TSDF voxel edge in metres, e.g. 0.0
 DEPTH_MAX = Bound("--depth-max", 0.1, 100.0, "m", "a depth cut-off in metres, e.g. 4")
 EVERY = Bound("--every", 1, 1_000_000, "", "use every N-th frame, e.g. 1", integer=True)
 MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 0.02")
+MATCH_RADIUS = Bound("--match-radius", 0.01, 100.0, "m", "a distance in metres, e.g. 1.0")
 
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
 _PLAN_OPTIONS = {**_SCENE_OPTIONS, "v": V, "tag_size": TAG_SIZE, "height": PLANE_HEIGHT, "level": LEVEL,
@@ -126,6 +127,8 @@ BOUNDS: dict[str, dict[str, Bound]] = {
     "plan": {**_PLAN_OPTIONS, "k": K},
     "evaluate": {**_PLAN_OPTIONS, "tests": TESTS, "runs": RUNS, "test_seed": TEST_SEED, "tag_scale": TAG_SCALE,
                  "shift": SHIFT},
+    "study": {**_PLAN_OPTIONS, "tests": TESTS, "test_seed": TEST_SEED},
+    "check": {"match_radius": MATCH_RADIUS, "workers": WORKERS},
 }
 """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
 pixels, ``plan --height`` metres). Comma-separated options are parsed by :func:`parse_floats` /
@@ -186,6 +189,17 @@ def parse_int_list(text: str, option: str, bound: Bound) -> tuple[int, ...]:
         raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
     for v in values:
         bound.check(v)
+    return values
+
+
+def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
+    """Parse a comma-separated list of finite numbers, each within ``bound`` (may be empty)."""
+    try:
+        values = tuple(float(v) for v in str(text).split(",") if v.strip())
+    except ValueError:
+        raise UserError(f"{option} {text!r} must be a comma-separated list of numbers, e.g. 0.1,0.25") from None
+    for v in values:
+        Bound(option, bound.lo, bound.hi, bound.unit, bound.hint).check(v)
     return values
 
 

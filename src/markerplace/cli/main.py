@@ -175,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .check import add_check_parser
     from .export import add_export_parser
 
+    from .study import add_study_parser
+
+    add_study_parser(sub)  # `study SCENE --out DIR`
     add_export_parser(sub)  # `export PLAN_DIR --gltf OUT.glb`
     add_check_parser(sub)  # `check PLAN_DIR --installed FILE.json`
 

@@ -4,7 +4,9 @@
 
 * ``omp``: :class:`OMP`, the paper's greedy (lazy greedy of :func:`~markerplace.plan.placement.omp_greedy`);
 * ``random``: :class:`RandomPlacement`, a seeded uniform sample of the candidates;
-* ``uniform``: :class:`UniformPlacement`, evenly spaced along the free-space perimeter (seeded offset).
+* ``uniform``: :class:`UniformPlacement`, evenly spaced along the free-space perimeter (seeded offset);
+* ``human``: :class:`HumanPlacement`, the paper's human baseline (centres of the least-textured
+  wall stretches, spread over rooms; :mod:`markerplace.plan.human`).
 
 A method works on the planner's :class:`~markerplace.plan.planner.PlanData` (base information
 per pose, one :class:`~markerplace.plan.placement.MarkerCoverage` per candidate, then one per
@@ -31,6 +33,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from ..registry import Registry, configure
+from .human import HumanConfig, human_placement
 from .placement import apply_coverages, omp_greedy, random_placement, uniform_placement
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -223,5 +226,25 @@ class UniformPlacement(PlacementMethod):
         return Choice(order, np.full(len(order), np.nan), float("nan"), _with_markers(data, order))
 
 
-__all__ = ["OMP", "PLACEMENT_METHODS", "Choice", "PlacementMethod", "RandomPlacement", "UniformPlacement",
-           "get_placement_method", "method_from_config"]
+@PLACEMENT_METHODS.register
+class HumanPlacement(PlacementMethod):
+    """The paper's real-experiment baseline, tags "placed by a human" who "prioritizes centers in
+    less textured areas": the centres of the least-textured flat wall stretches (SIFT points per
+    m^2 of wall in the map images), no two on one stretch, shared over rooms by free area
+    (:func:`~markerplace.plan.human.human_placement`; deterministic, the seed is unused)."""
+
+    name = "human"
+    summary = "centres of the least-textured wall stretches, spread over rooms"
+    label = "Human"
+    randomized = False
+
+    Config = HumanConfig
+    default_conf = Config()
+
+    def place(self, data: PlanData, k: int, seed: int = 0, progress: bool = False) -> Choice:
+        order = human_placement(data, k, self.conf, progress=progress)
+        return Choice(order, np.full(len(order), np.nan), float("nan"), _with_markers(data, order))
+
+
+__all__ = ["OMP", "PLACEMENT_METHODS", "Choice", "HumanPlacement", "PlacementMethod", "RandomPlacement",
+           "UniformPlacement", "get_placement_method", "method_from_config"]

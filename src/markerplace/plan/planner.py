@@ -112,6 +112,9 @@ class PlanData:
             information it adds there), then one per existing marker.
         num_candidates: C (coverages[C:] belong to existing markers).
         timings: seconds per stage.
+        points_world: (K, 3) float32 world metres of the map images' SIFT keypoints (NaN: no 3D
+            point), or None; for methods that look at the scene's texture (``human``).
+        pose_index: (K,) int32 camera pose of each keypoint, or None.
     """
 
     disc: Discretization
@@ -120,6 +123,8 @@ class PlanData:
     coverages: list
     num_candidates: int
     timings: dict
+    points_world: np.ndarray | None = None
+    pose_index: np.ndarray | None = None
 
 
 def validate(config: PlanConfig) -> None:
@@ -233,7 +238,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     disc = replace(disc, summary={**disc.summary, "candidates_removed": removed})
     coverages = build_coverages(disc.world_from_cam, all_T, sizes, visible, config)
     timings["score"] = time.perf_counter() - t0
-    return PlanData(disc, base_info, base_score, coverages, C, timings)
+    return PlanData(disc, base_info, base_score, coverages, C, timings, np.asarray(points), pose_index)
 
 
 @dataclass(frozen=True, eq=False)

@@ -28,7 +28,7 @@ Methods:
       k-means, trained on a seeded sample; each point is assigned once and searches its
       ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search). The only
       approximation is the probe limit: a look-alike in a cell that was not searched is missed,
-      so counts can only be too low, never too high. :func:`measure_error` reports how much.
+      so counts can only be too low, never too high. :func:`~markerplace.plan.similarity_quality.measure_error` reports how much.
     * ``auto``: ``exact`` up to ``exact_max_points`` points, else ``ivf``.
 
 Determinism: the training sample and FAISS's k-means are seeded from ``seed``; FAISS runs on
@@ -48,10 +48,11 @@ from dataclasses import dataclass
 import faiss
 import numpy as np
 
+from .similarity_kernel import count_candidates
+
 log = logging.getLogger(__name__)
 
-__all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_ivf",
-           "measure_error", "synthetic_descriptors"]
+__all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_ivf"]
 
 # half-width of the band around the cosine threshold in which a pair's float32 cosine (from
 # FAISS) is not trusted and the cosine is recomputed in float64 (10x the float32 error bound)
@@ -163,31 +164,18 @@ class _Pairs:
             cos_t: cosine threshold (strict); min_d2: squared minimum distance (strict).
 
         Returns:
-            (nq,) int64 counts, and (nq,) bool: the query has a candidate other than itself.
+            (nq,) int64 counts, and (nq,) bool: the query has a look-alike among the candidates
+            (cosine > ``cos_t``, at any 3D distance, itself excluded).
         """
         nq = len(queries)
-        pos = np.repeat(np.arange(nq, dtype=np.int64), np.diff(lims).astype(np.int64))
-        qi = np.asarray(queries, dtype=np.int64)[pos]
-        j = labels.astype(np.int64, copy=False)
-        d2 = np.sum((self.points[qi] - self.points[j]) ** 2, axis=1)
-        other = j != qi
-        found = np.bincount(pos[other], minlength=nq) > 0
-        far = (d2 > min_d2) & other
-        pos, qi, j = pos[far], qi[far], j[far]
-        if sims is None:  # the search ran on reduced vectors: the float32 cosine from X
-            s = np.empty(len(j), dtype=np.float32)
-            for a in range(0, len(j), 1 << 18):
-                s[a:a + (1 << 18)] = np.einsum("ij,ij->i", self.X[qi[a:a + (1 << 18)]], self.X[j[a:a + (1 << 18)]])
-        else:
-            s = sims[far]
-        ok = s > cos_t + _BAND
-        unsure = np.flatnonzero(~ok & (s > cos_t - _BAND))
-        if len(unsure):
-            a = self.raw[qi[unsure]].astype(np.float64)
-            b = self.raw[j[unsure]].astype(np.float64)
-            den = self.norm[qi[unsure]] * self.norm[j[unsure]]
-            ok[unsure] = np.einsum("ij,ij->i", a, b) > cos_t * den
-        return np.bincount(pos[ok], minlength=nq), found
+        counts = np.zeros(nq, dtype=np.int64)
+        found = np.zeros(nq, dtype=np.bool_)
+        has_sims = sims is not None
+        count_candidates(np.asarray(queries, dtype=np.int64), lims.astype(np.int64, copy=False),
+                         labels.astype(np.int64, copy=False), sims if has_sims else np.zeros(0, np.float32),
+                         has_sims, self.points, self.X, self.raw, self.norm, float(cos_t), _BAND, float(min_d2),
+                         counts, found)
+        return counts, found
 
 
 def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
@@ -297,24 +285,31 @@ def _nlist(P: int, config: SimilarityConfig) -> int:
 
 def _expand(searcher: _Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
             counts: np.ndarray) -> None:
-    """Search ``queries`` in further cells by doubling rings of rank [n, 2 n), [2 n, 4 n), ...
-    (n = ``searched.shape[1]``) up to ``nprobe_max``, while a query's last ring held a candidate.
+    """Search ``queries`` in further cells, by doubling rings: the nearest 2 n cells, then 4 n, ...
+    (n = ``searched.shape[1]``) up to ``nprobe_max``, while the last ring held a look-alike.
 
-    ``searched``: (Q, n) cells already searched; they are never searched again (even if the
-    quantizer ranks them differently now), so no pair is counted twice. Adds to ``counts``.
+    ``searched``: (Q, n) cells already searched. A cell is searched at most once per query (a
+    bitmap of visited cells, even if the quantizer ranks ties differently between calls), so no
+    pair is counted twice. Adds to ``counts``.
     """
-    n = searched.shape[1]
-    dist, cells = quantizer.search(searcher.vectors[queries], nprobe_max)
-    row = np.arange(len(queries), dtype=np.int64)[:, None] * (searcher.index.nlist + 1)
-    cells[np.isin(cells + row, searched + row)] = -1  # FAISS skips cells numbered -1
-    active = np.arange(len(queries))
-    lo = n
-    while lo < nprobe_max and len(active):
-        hi = min(2 * lo, nprobe_max)
-        c, found = searcher.search(queries[active], (cells[active, lo:hi], dist[active, lo:hi]))
-        counts[queries[active]] += c
-        active = active[found]
-        lo = hi
+    nlist = searcher.index.nlist
+    chunk = max(1, (1 << 26) // nlist)  # visited bitmaps of at most 64 MB
+    for s in range(0, len(queries), chunk):
+        q = queries[s:s + chunk]
+        visited = np.zeros((len(q), nlist), dtype=bool)
+        visited[np.arange(len(q))[:, None], np.maximum(searched[s:s + chunk], 0)] = True
+        active = np.arange(len(q))
+        lo = searched.shape[1]
+        while lo < nprobe_max and len(active):
+            hi = min(2 * lo, nprobe_max)
+            dist, cells = quantizer.search(searcher.vectors[q[active]], hi)
+            rows, ok = active[:, None], cells >= 0
+            cells[~ok | visited[rows, np.maximum(cells, 0)]] = -1  # FAISS skips cells numbered -1
+            visited[rows, np.maximum(cells, 0)] |= cells >= 0
+            c, found = searcher.search(q[active], (cells, dist))
+            counts[q[active]] += c
+            active = active[found]
+            lo = hi
 
 
 def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
@@ -378,9 +373,8 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
             counts[everyone] += c
             if nprobe_max > nprobe:
                 go_on = everyone[found]
-        for s in range(0, len(go_on), config.batch):
-            q = go_on[s:s + config.batch]
-            _expand(searcher, quantizer, q, cells[q], nprobe_max, counts)
+        if len(go_on):
+            _expand(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts)
     log.debug("similarity ivf: %d points, PCA %d, %d cells, nprobe %d, %d points searched further (max %d); "
               "wall (CPU) seconds: train %.1f (%.1f), assign + add %.1f (%.1f), search %.1f (%.1f)",
               P, d, nlist, nprobe, len(go_on), nprobe_max, t1 - t0, c1 - c0, t2 - t1, c2 - c1,
@@ -390,67 +384,3 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
 
 # ----------------------------------------------------------------------------------------------
 # measurement
-
-
-def synthetic_descriptors(n_points: int, seed: int = 0, dup_fraction: float = 0.3,
-                          extent: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
-    """SIFT-like test data: (P, 128) float32 descriptors (L2 norm 512) and (P, 3) points.
-
-    Base descriptors are non-negative, sparse 4x4x8 gradient histograms (gamma-distributed bins
-    with per-cell magnitudes, clipped at 0.2 and renormalised, as SIFT does). A fraction
-    ``dup_fraction`` are planted look-alikes: noisy copies of another descriptor (cosine mostly
-    0.85-0.99), in groups of 2-30, half of them placed far from the original (> 2 m) and half
-    near it (the same point seen from another pose).
-    """
-    rng = np.random.default_rng(seed)
-    n_base = max(1, int(round(n_points * (1 - dup_fraction))))
-    cell = rng.gamma(1.0, 1.0, size=(n_base, 16, 1))
-    D = (cell * rng.gamma(0.4, 1.0, size=(n_base, 16, 8))).reshape(n_base, 128)
-    pts = rng.uniform(0, extent, size=(n_base, 3)) * np.array([1.0, 1.0, 0.15])
-    out_d, out_p = [D], [pts]
-    left = n_points - n_base
-    while left > 0:
-        g = int(min(left, rng.integers(2, 31)))
-        src = int(rng.integers(n_base))
-        noise = rng.uniform(0.05, 0.45)
-        copies = np.abs(D[src] + noise * D[src].std() * rng.standard_normal((g, 128)))
-        far = rng.random(g) < 0.5
-        p = np.where(far[:, None], rng.uniform(0, extent, (g, 3)) * np.array([1.0, 1.0, 0.15]),
-                     pts[src] + rng.normal(0, 0.3, (g, 3)))
-        out_d.append(copies)
-        out_p.append(p)
-        left -= g
-    D = np.vstack(out_d)[:n_points]
-    pts = np.vstack(out_p)[:n_points]
-    D = D / np.linalg.norm(D, axis=1, keepdims=True)
-    D = np.minimum(D, 0.2)
-    D = D / np.linalg.norm(D, axis=1, keepdims=True) * 512.0
-    perm = rng.permutation(n_points)
-    return D[perm].astype(np.float32), pts[perm]
-
-
-def measure_error(approx: np.ndarray, exact: np.ndarray) -> dict:
-    """Error of approximate counts against exact counts of the same points.
-
-    Args:
-        approx, exact: (Q,) counts of the same Q points.
-
-    Returns:
-        dict: ``points``; ``recall`` (found / true look-alike pairs = sum approx / sum exact, 1.0
-        when there are none); ``mean_abs_error`` and ``max_abs_error`` of the counts;
-        ``frac_points_exact`` (points whose count is exact); ``over_counts`` (points counted too
-        high: must be 0); ``exact_mean`` (mean exact count).
-    """
-    approx = np.asarray(approx, dtype=np.int64)
-    exact = np.asarray(exact, dtype=np.int64)
-    err = approx - exact
-    total = int(exact.sum())
-    return {
-        "points": int(len(exact)),
-        "recall": float(approx.sum() / total) if total else 1.0,
-        "mean_abs_error": float(np.abs(err).mean()) if len(err) else 0.0,
-        "max_abs_error": int(np.abs(err).max()) if len(err) else 0,
-        "frac_points_exact": float(np.mean(err == 0)) if len(err) else 1.0,
-        "over_counts": int(np.sum(err > 0)),
-        "exact_mean": float(exact.mean()) if len(exact) else 0.0,
-    }

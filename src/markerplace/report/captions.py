@@ -137,8 +137,8 @@ class WallEnd:
     kind: str
 
     def words(self) -> str:
-        """``"corner"``, ``"wall's edge (door or opening)"`` or ``"nothing within 15 m"``."""
-        return {"corner": "corner", "edge": "wall's edge (door or opening)"}.get(self.kind, f"nothing within {MAX_RANGE:g} m")
+        """``"corner"``, ``"edge of its surface"`` or ``"nothing within 15 m"``."""
+        return {"corner": "corner", "edge": "edge of its surface"}.get(self.kind, f"nothing within {MAX_RANGE:g} m")
 
 
 def wall_end(caster, on_wall: np.ndarray, normal: np.ndarray, direction: np.ndarray,
@@ -215,14 +215,18 @@ class TagPlace:
         return self.on_wall + sign * end.distance * self.tangent
 
     def distance_words(self) -> str:
-        """``"1.20 m from the corner on its left (3.05 m from the edge ... on its right)"``."""
+        """E.g. ``"0.40 m from the edge of its surface on its right (a door, an opening, the end
+        of the wall or of furniture); 3.05 m from the corner on its left"``: the nearer end
+        first."""
         side, end = self.nearest
         other_side, other = ("right", self.right) if side == "left" else ("left", self.left)
         if not np.isfinite(end.distance):
-            return f"no corner or opening within {MAX_RANGE:g} m on either side"
+            return f"no corner or wall edge within {MAX_RANGE:g} m on either side"
         text = f"{end.distance:.2f} m from the {end.words()} on its {side}"
+        if end.kind == "edge":
+            text += " (a door, an opening, the end of the wall or of furniture)"
         if np.isfinite(other.distance):
-            text += f" ({other.distance:.2f} m from the {other.words()} on its {other_side})"
+            text += f"; {other.distance:.2f} m from the {other.words()} on its {other_side}"
         return text
 
 

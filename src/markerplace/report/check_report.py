@@ -32,6 +32,9 @@ log = logging.getLogger(__name__)
 __all__ = ["load_installed", "run_check"]
 
 WORST_LOCATIONS = 5
+LOSS_TOLERANCE = 1e-6
+"""Score drops below this (nats) are rounding: installed poses read back from placement.json
+differ from the planned ones in the last digits."""
 
 
 def load_installed(path: str | Path, default_size: float) -> list:
@@ -142,7 +145,7 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
     L = len(disc.locations)
     loc_drop = per_location_mean(drop, disc.location_index, L)
     loc_p, loc_i = per_location_mean(sp, disc.location_index, L), per_location_mean(si, disc.location_index, L)
-    worst = [int(l) for l in np.argsort(-loc_drop, kind="stable")[:WORST_LOCATIONS] if loc_drop[l] > 1e-9]
+    worst = [int(l) for l in np.argsort(-loc_drop, kind="stable")[:WORST_LOCATIONS] if loc_drop[l] > LOSS_TOLERANCE]
     rows = []
     for r in result.rows:
         P, Q = _user(r.planned, offset), _user(r.installed, offset)

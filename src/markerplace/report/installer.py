@@ -6,9 +6,9 @@ markers as textured quads):
 - **close**: from about :data:`CLOSE_DISTANCE` in front of the spot, at the tag's height
   (eye level), looking straight at it, :data:`CLOSE_HFOV` degrees wide; the tag is outlined.
 - **wide**: from as far back as the room allows (up to :data:`WIDE_DISTANCE`), :data:`WIDE_HFOV`
-  degrees wide, so the wall and its corners or doors are in view; the tag is outlined and two
-  dimension lines show the caption's measurements: along the wall to the nearest corner or
-  opening edge, and down to the local floor.
+  degrees wide, turned towards the nearest corner or wall edge just enough to show it (the tag
+  stays in view, :func:`wide_turn`); the tag is outlined and two dimension lines show the
+  caption's measurements: along the wall to that corner or edge, and down to the local floor.
 
 The camera always stands in free space: a ray from the tag along its normal (at its height)
 stops at the first obstacle, the camera keeps :data:`BODY_CLEARANCE` from it, and its grid cell
@@ -28,19 +28,21 @@ import numpy as np
 from ..geometry import Intrinsics, project, world_from_cam_pose
 from ..render.tags import outer_size
 
-__all__ = ["CLOSE_DISTANCE", "WIDE_DISTANCE", "standing_distance", "InstallerViews", "render_installer_views",
+__all__ = ["CLOSE_DISTANCE", "WIDE_DISTANCE", "standing_distance", "wide_turn", "InstallerViews", "render_installer_views",
            "draw_outline", "draw_dimension"]
 
 CLOSE_DISTANCE = 2.0
 """Preferred distance of the close view from the tag, metres."""
-WIDE_DISTANCE = 5.0
+WIDE_DISTANCE = 4.5
 """Farthest distance of the wide view from the tag, metres."""
 MIN_DISTANCE = 0.6
 """Nearest a view stands to the tag, metres (closer only when nothing else is free)."""
 BODY_CLEARANCE = 0.3
 """Room kept between the camera and the obstacle behind it, metres."""
 CLOSE_HFOV = 60.0
-WIDE_HFOV = 100.0
+WIDE_HFOV = 80.0
+VIEW_MARGIN_DEG = 8.0
+"""Angle kept between the image border and the tag or the reference corner in the wide view."""
 IMAGE_SIZE = (640, 480)
 """Width and height of both views, pixels."""
 OUTLINE_BGR = (255, 0, 255)
@@ -105,22 +107,25 @@ def draw_outline(rgb: np.ndarray, K: np.ndarray, world_from_cam: np.ndarray, mar
     return img[..., ::-1].copy()
 
 
-def _text(img_bgr: np.ndarray, text: str, org: tuple[int, int], color) -> None:
+def _text(img_bgr: np.ndarray, text: str, org: tuple[int, int], color, centred: bool = False) -> None:
+    """Write ``text`` on a white box at ``org`` (its left end, or its middle when ``centred``),
+    kept inside the image."""
     import cv2
 
     H, W = img_bgr.shape[:2]
     (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.6, 2)
-    x = int(np.clip(org[0], 2, max(2, W - tw - 2)))
+    x = int(np.clip(org[0] - (tw // 2 if centred else 0), 2, max(2, W - tw - 2)))
     y = int(np.clip(org[1], th + 2, H - 4))
     cv2.rectangle(img_bgr, (x - 2, y - th - 3), (x + tw + 2, y + 4), (255, 255, 255), -1)
     cv2.putText(img_bgr, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2, cv2.LINE_AA)
 
 
 def draw_dimension(rgb: np.ndarray, K: np.ndarray, world_from_cam: np.ndarray, a: np.ndarray, b: np.ndarray,
-                   text: str, ticks: bool = True) -> np.ndarray:
+                   text: str, ticks: bool = True, text_below: bool = False) -> np.ndarray:
     """Draw a dimension line between world points ``a`` and ``b`` (3,) with end ticks (unless
-    ``ticks`` is False: a plain extension line) and ``text`` at its middle (clamped into the
-    image); returns a new RGB image. Nothing is drawn when either end is behind the camera."""
+    ``ticks`` is False: a plain extension line) and ``text`` beside its middle (right of it, or
+    centred under it with ``text_below``; clamped into the image); returns a new RGB image.
+    Nothing is drawn when either end is behind the camera."""
     import cv2
 
     img = _bgr(rgb)
@@ -137,9 +142,27 @@ def draw_dimension(rgb: np.ndarray, K: np.ndarray, world_from_cam: np.ndarray, a
             cv2.line(img, tuple(int(v) for v in np.clip(np.round(p - perp), -lim, lim)),
                      tuple(int(v) for v in np.clip(np.round(p + perp), -lim, lim)), color, 2, cv2.LINE_AA)
         mid = np.clip(0.5 * (uv[0] + uv[1]), [0, 0], [W - 1, H - 1])
-        if text:
-            _text(img, text, (int(mid[0]) + 6, int(mid[1]) - 6), color)
+        if text and text_below:
+            _text(img, text, (int(mid[0]), int(mid[1]) + 24), color, centred=True)
+        elif text:
+            _text(img, text, (int(mid[0]) + 8, int(mid[1]) + 6), color)
     return img[..., ::-1].copy()
+
+
+def wide_turn(place, distance: float, hfov_deg: float = WIDE_HFOV, margin_deg: float = VIEW_MARGIN_DEG) -> float:
+    """Yaw (radians, counter-clockwise) to add to a camera ``distance`` metres in front of a tag,
+    looking straight at it, so that the nearest corner or wall edge of ``place`` (a
+    :class:`~markerplace.report.captions.TagPlace`) is in view: just enough to bring it
+    ``margin_deg`` inside the image border, and never so much that the tag leaves the same
+    margin. 0 when it is in view already or there is none."""
+    ref = place.reference_point()
+    if ref is None:
+        return 0.0
+    side, end = place.nearest
+    half = np.radians(hfov_deg / 2.0 - margin_deg)
+    turn = float(np.clip(np.arctan2(end.distance, distance) - half, 0.0, half))
+    # turning counter-clockwise swings the view from the wall normal towards -tangent (the viewer's left)
+    return turn if side == "left" else -turn
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,7 +213,7 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
             d_close = standing_distance(caster, occ, origin, resolution, p, n, CLOSE_DISTANCE)
             d_wide = max(standing_distance(caster, occ, origin, resolution, p, n, WIDE_DISTANCE), d_close)
             T_close = world_from_cam_pose(p + d_close * n, yaw)
-            T_wide = world_from_cam_pose(p + d_wide * n, yaw)
+            T_wide = world_from_cam_pose(p + d_wide * n, yaw + wide_turn(place, d_wide))
             close = draw_outline(close_r.render(T_close, depth=False, normal=False).rgb, close_intr.K, T_close, m,
                                  labels[i])
             wide = wide_r.render(T_wide, depth=False, normal=False).rgb
@@ -203,7 +226,7 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
                 below = np.array([0.0, 0.0, 0.6 * outer_size(m.size) + 0.12])  # under the outline, not across the tag
                 wide = draw_dimension(wide, wide_intr.K, T_wide, front, front - below, "", ticks=False)
                 wide = draw_dimension(wide, wide_intr.K, T_wide, front - below, ref + 0.01 * n - below,
-                                      f"{end.distance:.2f} m")
+                                      f"{end.distance:.2f} m", text_below=True)
             beside = front + side * (0.6 * outer_size(m.size) + 0.15) * place.tangent
             wide = draw_dimension(wide, wide_intr.K, T_wide, np.array([beside[0], beside[1], place.floor_z]), beside,
                                   f"{place.height:.2f} m")

@@ -35,8 +35,9 @@ CONVENTION = ("Directions name the model's axes like a map seen from above: <b>+
               "Left and right are as seen standing in front of the tag, looking at it. Heights are of the "
               "tag centre (the middle of the black square) above the floor in front of it; distances run "
               "along the wall at that height from the tag centre to the nearest corner (the next wall or "
-              "something standing against it) or the wall's edge (a door or opening, an outside corner), "
-              "measured with rays on the model; a picture or panel on the wall does not end it. Coordinates are the model's, in metres, z up.")
+              "something standing against it) or the edge of the surface the tag hangs on (a door, an opening, "
+              "an outside corner, the end of a cupboard the tag is on), measured with rays on the model; a "
+              "picture or panel on the wall does not end it. Coordinates are the model's, in metres, z up.")
 
 
 def _storey_of(z: float, storeys: np.ndarray, height: float) -> int:

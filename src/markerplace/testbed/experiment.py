@@ -89,7 +89,8 @@ def _codebook(path: Path, key: str, map_base: BaseImages, config, timings: dict)
 
 
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
-                   imaging_config=None, progress: bool = True, reuse_unchanged: bool = True) -> EvaluationResult:
+                   imaging_config=None, progress: bool = True, reuse_unchanged: bool = True,
+                   work_dir: str | Path | None = None, extra_placements: dict | None = None) -> EvaluationResult:
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
@@ -107,6 +108,10 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         progress: progress bars.
         reuse_unchanged: give queries no placement's marker can change the no-marker result
             instead of localizing them again (exact; see :func:`_predict_all`).
+        work_dir: folder of the planner's artifacts and the caches (default ``out_dir``); runs
+            that share it share every stage their inputs have in common (``markerplace study``).
+        extra_placements: more marker sets evaluated as methods: name -> markers in the
+            internal (scene) frame.
     """
     from ..imaging.config import SIFT_DEFAULT
     from ..io_utils import write_json
@@ -121,27 +126,28 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     validate(plan_config)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cache_dir = out / "cache"
+    work = Path(work_dir) if work_dir is not None else out
+    cache_dir = work / "cache"
     timings: dict[str, float] = {}
     imaging = imaging_config or replace(plan_config.imaging, sift=SIFT_DEFAULT)
     lcfg = _localizer_spec(config)
 
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
-        data = prepare(scene_spec, plan_config, out / "plan", progress=progress, executor=executor)
+        data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor)
         timings["plan_prepare"] = time.perf_counter() - t0
         scene = scene_spec.load()
         map_poses = np.asarray(data.disc.world_from_cam, float)
         base_key = cache.hash_of("testbed-v1", cache.scene_hash(scene), map_poses)
 
         t0 = time.perf_counter()
-        extra = {}
+        extra = dict(extra_placements or {})
         if placements_dir is not None:
             from ..scene.worldframe import markers_to_internal, world_offset
 
             # placement files are in the user's (file) frame; the scene may be recentred
-            extra = {name: markers_to_internal(load_markers(p), world_offset(scene))
-                     for name, p in find_placement_files(placements_dir).items()}
+            extra.update({name: markers_to_internal(load_markers(p), world_offset(scene))
+                          for name, p in find_placement_files(placements_dir).items()})
         placements = build_placements(data, plan_config.placement, config, extra)
         timings["placements"] = time.perf_counter() - t0
         log.info("evaluating %d marker sets: %s", len(placements), ", ".join(sorted({p.method for p in placements})))
