@@ -51,17 +51,18 @@ def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> plann
     return planner.PlanData(disc, base, -entropy(base), covs, C, {})
 
 
-def test_registry_lists_the_four_methods_in_order():
-    assert PLACEMENT_METHODS.names() == ("omp", "random", "uniform", "human")
-    assert [c.label for c in PLACEMENT_METHODS.values()] == ["Ours", "Rand.", "Unif.", "Human"]
-    assert [c.randomized for c in PLACEMENT_METHODS.values()] == [False, True, True, False]
-    assert PLACEMENT_METHODS["omp"].nested
+def test_registry_lists_the_five_methods_in_order():
+    assert PLACEMENT_METHODS.names() == ("omp", "random", "uniform", "human", "expected-recall")
+    assert [c.label for c in PLACEMENT_METHODS.values()] == ["Ours", "Rand.", "Unif.", "Human", "E[recall]"]
+    assert [c.randomized for c in PLACEMENT_METHODS.values()] == [False, True, True, False, False]
+    assert [c.calibrated for c in PLACEMENT_METHODS.values()] == [False, False, False, False, True]
+    assert PLACEMENT_METHODS["omp"].nested and PLACEMENT_METHODS["expected-recall"].nested
 
 
 def test_unknown_method_is_a_one_line_user_error():
     with pytest.raises(UserError) as err:
         get_placement_method("greedy")
-    assert str(err.value) == "--method 'greedy' is not known: use one of omp, random, uniform, human"
+    assert str(err.value) == "--method 'greedy' is not known: use one of omp, random, uniform, human, expected-recall"
     with pytest.raises(UserError, match="--method 'greedy' is not known"):
         planner.validate(planner.PlanConfig(placement=planner.PlacementConfig(method="greedy")))
     with pytest.raises(UserError, match="--marker-model 'x' is not known: use one of paper, corners"):
@@ -174,7 +175,7 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
                                       "--k", "2,3", "--runs", "2"])
     ecfg = evaluate_config_from_args(args)
     tbconfig.validate_evaluate_config(ecfg)
-    assert placements.method_names() == ("none", "omp", "random", "uniform", "human", "toy", "toyrand")
+    assert placements.method_names() == ("none", "omp", "random", "uniform", "human", "expected-recall", "toy", "toyrand")
     assert placements.baseline_methods() == ("random", "uniform", "toyrand")
     assert tbconfig.EvaluateConfig().study.methods == placements.method_names()
     runs = placements.build_placements(data, config.placement, ecfg)
@@ -194,7 +195,7 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
 def test_unknown_evaluate_method_lists_the_registry(toy_methods):
     with pytest.raises(UserError) as err:
         tbconfig.validate_evaluate_config(tbconfig.EvaluateConfig(study=tbconfig.StudyConfig(methods=("none", "best"))))
-    assert "use a comma list of none, omp, random, uniform, human, toy, toyrand" in str(err.value)
+    assert "use a comma list of none, omp, random, uniform, human, expected-recall, toy, toyrand" in str(err.value)
 
 
 def test_build_placements_order_and_seeds_are_unchanged():

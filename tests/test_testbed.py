@@ -105,8 +105,11 @@ def test_render_reuse_identical_without_marker_in_view():
         marked = tb.render(poses, [0, 1], [seen], False, "with marker")
     vis = np.stack([base[0].extras["in_view"], base[1].extras["in_view"]])
     assert vis.tolist() == [[True, False], [False, True]]
-    assert tb.view_keys(vis, [seen]) == [(0,), ()]
+    assert tb.view_keys(vis, [seen]) == [((0, 5),), ()]  # (union column, tag id) of the markers in view
     assert tb.view_keys(vis, []) == [(), ()]
+    # another id at the same pose: the same visibility column, another appearance
+    renamed = Marker(9, 0.4, seen.world_from_marker)
+    assert tb.view_keys(vis, [renamed]) == [((0, 9),), ()] and len(tb.union) == 2
     base = {i: (f, None) for i, f in base.items()}
     marked = {i: (f, None) for i, f in marked.items()}
     # pose 1 looks away from 'seen': features identical with and without it
@@ -175,7 +178,8 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
         assert (out / name).stat().st_size > 0, name
     rows = list(csv.DictReader((out / "recall.csv").open()))
     got = {(r["method"], r["run"], r["k"], r["test_set"], r["threshold"]) for r in rows}
-    expected = {(m, "0", k, ts, th) for m, k in [("none", "0"), ("omp", "2"), ("random", "2"), ("uniform", "2"), ("human", "2")]
+    expected = {(m, "0", k, ts, th) for m, k in [("none", "0"), ("omp", "2"), ("random", "2"), ("uniform", "2"), ("human", "2"),
+                                                 ("expected-recall", "2")]
                 for ts in ("weighted", "uniform") for th in ("1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg")}
     assert got == expected and len(rows) == len(expected)
     assert all(r["scene"] == "tiny" and r["n_tests"] == "20" and 0.0 <= float(r["recall"]) <= 1.0 for r in rows)
@@ -188,12 +192,12 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     assert "| tiny (" in tables
     assert "## Paired differences at 5cm/5deg" in tables and "| Ours | Rand. (1 run) |" in tables
     errs = np.load(out / "query_errors.npz")
-    assert errs["weighted_t_err"].shape == (5, 20)
-    assert errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform", "human"]
+    assert errs["weighted_t_err"].shape == (6, 20)
+    assert errs["weighted_method"].tolist() == ["none", "omp", "random", "uniform", "human", "expected-recall"]
     # same test poses for every method: one file per test set, identical on a re-run
     poses = tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
     results = sorted((out / "cache" / "predictions").glob("*.npz"))
-    assert len(results) == 10
+    assert len(results) == 12
     stamps = [p.stat().st_mtime_ns for p in results]
     assert main(args) == 0  # resume: every placement's predictions are reused
     assert [p.stat().st_mtime_ns for p in results] == stamps
@@ -256,10 +260,11 @@ def test_reusing_unchanged_queries_changes_no_result(tmp_path):
     plan = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=4),
                       runtime=RuntimeConfig(workers=1))
     config = tbconfig.EvaluateConfig(test=tbconfig.TestSetConfig(tests=12, sets=("weighted",)),
-                                     study=tbconfig.StudyConfig(methods=("none", "omp"), runs=1, ks=(3,)))
+                                     study=tbconfig.StudyConfig(methods=("none", "omp"), runs=1, ks=(3,)),
+                                     diagnostics=tbconfig.DiagnosticsConfig(calibration=True))
     import shutil
 
-    errors = {}
+    errors, outcomes = {}, {}
     for reuse in (False, True):
         out = tmp_path / f"reuse_{reuse}"
         if reuse:  # the same plan, map and query features; only the predictions are made again
@@ -267,12 +272,18 @@ def test_reusing_unchanged_queries_changes_no_result(tmp_path):
         run_evaluation(SceneSpec("tiny"), plan, config, out, placements_dir=tmp_path / "extra", progress=False,
                        reuse_unchanged=reuse)
         errors[reuse] = np.load(out / "query_errors.npz")
+        outcomes[reuse] = np.load(out / "map_outcomes.npz")
         metas = [json.loads(p.read_text()) for p in (out / "cache" / "predictions").glob("*.meta.json")]
-        localized = {(m["method"], m["k"]): m["localized"] for m in metas}
-        assert localized[("omp", 3)] > 0
+        localized = {(m["method"], m["k"], m["test_set"]): m["localized"] for m in metas}
+        assert localized[("omp", 3, "weighted")] > 0 and localized[("omp", 3, "map")] > 0
         # (a query whose image edge the tag is near counts as seeing it: the in-view test is conservative)
-        assert localized[("outside", 1)] < 4 if reuse else localized[("outside", 1)] == 12
+        assert localized[("outside", 1, "weighted")] < 4 if reuse else localized[("outside", 1, "weighted")] == 12
+        # map images, each localized without its own location: the same reuse rule, with that exclusion
+        assert localized[("outside", 1, "map")] < 8 if reuse else localized[("outside", 1, "map")] == 32
     assert errors[True]["weighted_method"].tolist() == ["none", "omp", "outside"]
     for key in errors[False].files:
         a, b = errors[False][key], errors[True][key]
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), key
+    assert outcomes[True].files == outcomes[False].files and "corners_score" in outcomes[True].files
+    for key in outcomes[False].files:
+        assert np.array_equal(outcomes[False][key], outcomes[True][key]), key

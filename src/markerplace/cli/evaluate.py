@@ -26,7 +26,7 @@ def _name_list(text: str) -> tuple[str, ...]:
 
 def evaluate_config_from_args(args: argparse.Namespace):
     """Build an :class:`~markerplace.testbed.config.EvaluateConfig` from parsed ``evaluate`` arguments."""
-    from ..testbed.config import EvaluateConfig, LocalizationConfig, StudyConfig, TestSetConfig
+    from ..testbed.config import DiagnosticsConfig, EvaluateConfig, LocalizationConfig, StudyConfig, TestSetConfig
 
     return EvaluateConfig(
         test=TestSetConfig(tests=args.tests, sets=_name_list(args.test_sets), seed=args.test_seed),
@@ -34,6 +34,7 @@ def evaluate_config_from_args(args: argparse.Namespace):
                           tag_scale=args.tag_scale, shift=args.shift),
         localization=LocalizationConfig(localizer=args.localizer, use_tags=not args.no_tags,
                                         tag_corners=args.tag_corners),
+        diagnostics=DiagnosticsConfig(ceiling=args.ceiling, calibration=args.calibration),
         seed=args.seed,
     )
 
@@ -68,7 +69,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result = run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,
                             progress=not getattr(args, "quiet", False))
     print(result.summary)
-    print(f"\nwrote {args.out}/recall.csv, tables.md, recall_vs_k.png, query_errors.npz, timings.json, config.json")
+    extra = "".join(f", {f}" for f, on in (("ceiling.md", args.ceiling), ("calibration.md, calibration.png, map_outcomes.npz",
+                                                                          args.calibration)) if on)
+    print(f"\nwrote {args.out}/recall.csv, tables.md, recall_vs_k.png, query_errors.npz, timings.json, config.json, "
+          f"report.html{extra}")
     return 0
 
 
@@ -112,6 +116,15 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                    help="print tags this many times the planned size (sensitivity study; default 1)")
     g.add_argument("--shift", type=float, default=0.0,
                    help="move every marker along its wall by +-D metres, alternating sign (sensitivity study; default 0)")
+    g = p.add_argument_group("diagnostics (each costs extra localizations)")
+    g.add_argument("--ceiling", action="store_true",
+                   help="oracle ceiling: every candidate evaluated alone on the test images, the greedy best k "
+                        "evaluated as a placement (a diagnostic that uses the test images, never a method); "
+                        "writes ceiling.md and adds 'ceiling' rows")
+    g.add_argument("--calibration", action="store_true",
+                   help="localize every map image against the rest of the map (leave one location out) without "
+                        "and with each placement's tags, and report how well the score predicts success per marker "
+                        "model: calibration.md, calibration.png, map_outcomes.npz")
     add_plan_args(p)
     p.set_defaults(func=cmd_evaluate)
     return p

@@ -98,7 +98,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
     check_markers_on_walls(scene, existing, f"--existing {args.existing}")
     run_config = plan_inputs_in_scene_frame(config, scene, args.force)
     progress = not args.quiet
-    data = prepare(spec, run_config, args.out, existing=existing, progress=progress)
+    from ..runtime.executor import make_executor
+    from ..testbed.calibration import calibrate_plan
+
+    with make_executor(run_config.runtime) as executor:
+        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
+        calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,

@@ -129,13 +129,20 @@ class Localizer:
         cosang = self._axes @ world_from_cam[:3, 2]
         return close & (cosang >= np.cos(np.radians(c.tag_pose_angle_deg)))
 
-    def retrieve(self, query_vlad: np.ndarray, tags: list[TagDetection]) -> list[int]:
-        """Candidate map image indices (tag-based first, then VLAD), at most ``num_candidates``."""
+    def retrieve(self, query_vlad: np.ndarray, tags: list[TagDetection], exclude=None) -> list[int]:
+        """Candidate map image indices (tag-based first, then VLAD), at most ``num_candidates``.
+
+        ``exclude``: map image indices never returned (e.g. the images taken at a map image's
+        own location when that image is localized against the rest of the map); the ranking
+        of the others is unchanged."""
         n = self.config.num_candidates
         if len(self.db) == 0 or n <= 0:
             return []
         sims = self.db.vlad @ query_vlad
         out: list[int] = []
+        excluded = np.zeros(len(self.db), bool)
+        if exclude is not None:
+            excluded[np.asarray(exclude, dtype=np.int64)] = True
         if tags:
             saw = np.zeros(len(self.db), bool)
             near = np.zeros(len(self.db), bool)
@@ -148,13 +155,13 @@ class Localizer:
                     except (RuntimeError, cv2.error) as exc:  # degenerate corners
                         log.debug("pose_from_tag failed for tag %d: %s", det.tag_id, exc)
             for group in (saw & near, near & ~saw, saw & ~near):
-                idx = np.flatnonzero(group)
+                idx = np.flatnonzero(group & ~excluded)
                 out.extend(int(i) for i in idx[np.argsort(-sims[idx], kind="stable")])
             out = out[:n]
         if len(out) < n:
             taken = set(out)
-            order, _ = nearest(self.db.vlad, query_vlad, n + len(out))
-            out.extend(int(i) for i in order if int(i) not in taken)
+            order, _ = nearest(self.db.vlad, query_vlad, n + len(out) + int(excluded.sum()))
+            out.extend(int(i) for i in order if int(i) not in taken and not excluded[i])
             out = out[:n]
         return out
 
@@ -208,13 +215,14 @@ class Localizer:
         return result
 
     def localize_features(self, keypoints: np.ndarray, descriptors: np.ndarray,
-                          tags: list[TagDetection]) -> LocalizationResult:
+                          tags: list[TagDetection], exclude=None) -> LocalizationResult:
         """Localize precomputed query features.
 
         Args:
             keypoints: (K, 2) pixel xy of the query's SIFT keypoints.
             descriptors: (K, 128) float32 SIFT descriptors (``config.sift`` parameters).
             tags: tag detections in the query (ignored unless tags or tag corners are on).
+            exclude: map image indices left out of retrieval (see :meth:`retrieve`).
 
         Returns:
             the estimate (``world_from_cam`` None on failure) with retrieval and match details.
@@ -224,7 +232,7 @@ class Localizer:
         t2 = time.perf_counter()
         desc = np.asarray(descriptors, dtype=np.float32)
         qv = self.db.codebook.vlad(desc)
-        candidates = self.retrieve(qv, tags if c.use_tags else [])
+        candidates = self.retrieve(qv, tags if c.use_tags else [], exclude)
         t3 = time.perf_counter()
         timing["retrieval"] = t3 - t2
         qidx, pts = self.match(desc, candidates)

@@ -75,6 +75,8 @@ class PlacementMethod:
             compares the other methods against the mean of its runs (a baseline).
         nested: the first k' picks of a k-marker choice are the k'-marker choice, so
             ``evaluate`` places it once with the largest k.
+        calibrated: it needs ``PlanData.calibration[name]``, filled before placing by
+            :func:`markerplace.testbed.calibration.calibrate_plan` (localizations of map images).
         default_conf: the method's own settings (a frozen ``Config``).
 
     Attributes:
@@ -86,6 +88,7 @@ class PlacementMethod:
     label: ClassVar[str] = ""
     randomized: ClassVar[bool] = False
     nested: ClassVar[bool] = False
+    calibrated: ClassVar[bool] = False
 
     @dataclass(frozen=True)
     class Config:
@@ -246,5 +249,61 @@ class HumanPlacement(PlacementMethod):
         return Choice(order, np.full(len(order), np.nan), float("nan"), _with_markers(data, order))
 
 
-__all__ = ["OMP", "PLACEMENT_METHODS", "Choice", "HumanPlacement", "PlacementMethod", "RandomPlacement",
+@PLACEMENT_METHODS.register
+class ExpectedRecall(PlacementMethod):
+    """Beyond the paper: k greedy picks that maximize the expected number of feasible poses that
+    localize, ``sum_p P(success | s_p)`` (:func:`~markerplace.plan.expected_recall.expected_recall_greedy`),
+    with ``P`` a logistic :class:`~markerplace.plan.success_model.SuccessModel` of the score fitted
+    on the scene's own map images, each localized against the rest of the map without and with
+    seeded random tag sets (:func:`markerplace.testbed.calibration.calibrate_plan`: map images
+    only, never test images). Plain greedy (the objective is not submodular); deterministic."""
+
+    name = "expected-recall"
+    summary = "greedy on the expected number of poses that localize (fitted on map images; beyond the paper)"
+    label = "E[recall]"
+    randomized = False
+    nested = True
+    calibrated = True
+
+    @dataclass(frozen=True)
+    class Config:
+        """Settings of ``expected-recall``.
+
+        Attributes:
+            tag_model: marker model of the scores it fits and optimizes (``corners``, default:
+                it predicts map-image localization better than ``paper``, docs/results.md).
+            calibration_runs: seeded random tag sets the map images are localized with, besides
+                none (default 3).
+            calibration_k: tags per calibration set (default 20, at most the candidates).
+            calibration_seed: seed of the calibration sets (default 0).
+        """
+
+        tag_model: str = "corners"
+        calibration_runs: int = 3
+        calibration_k: int = 20
+        calibration_seed: int = 0
+
+    default_conf = Config()
+
+    def place(self, data: PlanData, k: int, seed: int = 0, progress: bool = False) -> Choice:
+        from ..errors import UserError
+        from .expected_recall import expected_recall_greedy
+
+        fit = data.calibration.get(self.name)
+        if fit is None:
+            raise UserError("--method expected-recall needs the calibration stage: run it through `markerplace plan` or "
+                            "`markerplace evaluate` (markerplace.testbed.calibration.calibrate_plan)")
+        C = data.num_candidates
+
+        def report(i: int, k: int, candidate: int, gain: float) -> None:
+            log.info("expected-recall pick %d/%d: candidate %d, +%.2f expected poses", i + 1, k, candidate, gain)
+
+        covs = fit["coverages"]
+        res = expected_recall_greedy(data.base_info, covs[:C], k, fit["model"], existing=covs[C:],
+                                     progress=report if progress else None)
+        return Choice(np.asarray(res.order, dtype=np.int64), np.asarray(res.gains, dtype=float), float("nan"),
+                      res.info_after)
+
+
+__all__ = ["OMP", "PLACEMENT_METHODS", "ExpectedRecall", "Choice", "HumanPlacement", "PlacementMethod", "RandomPlacement",
            "UniformPlacement", "get_placement_method", "method_from_config"]

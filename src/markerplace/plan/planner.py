@@ -115,6 +115,13 @@ class PlanData:
         points_world: (K, 3) float32 world metres of the map images' SIFT keypoints (NaN: no 3D
             point), or None; for methods that look at the scene's texture (``human``).
         pose_index: (K,) int32 camera pose of each keypoint, or None.
+        visible: (N, C + E) bool: the pose sees the marker (geometry and occlusion), candidates
+            then existing markers, or None; with ``marker_poses`` (C + E, 4, 4) and
+            ``marker_sizes`` (C + E,) metres it rebuilds the coverages under another marker
+            model (:func:`coverages_with_model`).
+        calibration: what a calibrated method needs, filled by
+            :func:`markerplace.testbed.calibration.calibrate_plan` (e.g. the fitted
+            :class:`~markerplace.plan.success_model.SuccessModel` of ``expected-recall``).
     """
 
     disc: Discretization
@@ -125,6 +132,10 @@ class PlanData:
     timings: dict
     points_world: np.ndarray | None = None
     pose_index: np.ndarray | None = None
+    visible: np.ndarray | None = None
+    marker_poses: np.ndarray | None = None
+    marker_sizes: np.ndarray | None = None
+    calibration: dict = field(default_factory=dict)
 
 
 def validate(config: PlanConfig) -> None:
@@ -238,7 +249,17 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     disc = replace(disc, summary={**disc.summary, "candidates_removed": removed})
     coverages = build_coverages(disc.world_from_cam, all_T, sizes, visible, config)
     timings["score"] = time.perf_counter() - t0
-    return PlanData(disc, base_info, base_score, coverages, C, timings, np.asarray(points), pose_index)
+    return PlanData(disc, base_info, base_score, coverages, C, timings, np.asarray(points), pose_index,
+                    visible, all_T, np.asarray(sizes, float))
+
+
+def coverages_with_model(data: PlanData, config: PlanConfig, marker_model: str) -> list:
+    """``data.coverages`` (candidates, then existing markers) with the information of another
+    registered marker model (the same poses see each marker)."""
+    if marker_model == config.placement.marker_model:
+        return data.coverages
+    cfg = replace(config, placement=replace(config.placement, marker_model=marker_model))
+    return build_coverages(data.disc.world_from_cam, data.marker_poses, list(data.marker_sizes), data.visible, cfg)
 
 
 @dataclass(frozen=True, eq=False)

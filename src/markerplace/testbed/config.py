@@ -9,10 +9,10 @@ from dataclasses import dataclass, field
 
 from ..errors import UserError
 from .metrics import THRESHOLDS
-from .placements import method_names
+from .placements import NO_MARKERS, method_names
 from .poses import TEST_SETS
 
-__all__ = ["TestSetConfig", "StudyConfig", "LocalizationConfig", "EvaluateConfig", "validate_evaluate_config"]
+__all__ = ["TestSetConfig", "StudyConfig", "LocalizationConfig", "DiagnosticsConfig", "EvaluateConfig", "validate_evaluate_config"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,22 @@ class LocalizationConfig:
 
 
 @dataclass(frozen=True)
+class DiagnosticsConfig:
+    """Extra analyses of an evaluation (off by default: each costs localizations).
+
+    Attributes:
+        ceiling: the oracle ceiling (:mod:`markerplace.testbed.ceiling`): every candidate
+            evaluated alone on the test images, the greedy best k evaluated as a placement.
+        calibration: map images localized against the rest of the map without and with each
+            placement's tags, and how well the score predicts that
+            (:mod:`markerplace.testbed.calibration`).
+    """
+
+    ceiling: bool = False
+    calibration: bool = False
+
+
+@dataclass(frozen=True)
 class EvaluateConfig:
     """Every setting of an ``evaluate`` run, saved resolved in its ``config.json``.
 
@@ -81,6 +97,7 @@ class EvaluateConfig:
         test: which test images.
         study: what is compared.
         localization: how test images are localized.
+        diagnostics: the oracle ceiling and the score's calibration on map images.
         thresholds: recall thresholds (metres, degrees).
         seed: seed of the localizer's RANSAC, of the VLAD codebook's k-means and, unless
             ``test.seed`` is set, of the test poses and the shift signs.
@@ -89,6 +106,7 @@ class EvaluateConfig:
     test: TestSetConfig = field(default_factory=TestSetConfig)
     study: StudyConfig = field(default_factory=StudyConfig)
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
+    diagnostics: DiagnosticsConfig = field(default_factory=DiagnosticsConfig)
     thresholds: tuple[tuple[float, float], ...] = THRESHOLDS
     seed: int = 0
 
@@ -109,4 +127,7 @@ def validate_evaluate_config(config: EvaluateConfig) -> None:
     if any(m not in method_names() for m in methods):
         raise UserError(f"--methods {','.join(methods)!r} is not valid: use a comma list of {', '.join(method_names())}")
     LOCALIZERS.lookup(config.localization.localizer)
+    diag = config.diagnostics
+    if (diag.ceiling or diag.calibration) and NO_MARKERS not in methods:
+        raise UserError("--ceiling and --calibration compare with no markers: keep 'none' in --methods")
     check_evaluate_config(config)  # numbers: finite and in range (markerplace.validation)

@@ -17,7 +17,6 @@ run (in process, local processes or a Dask cluster).
 from __future__ import annotations
 
 import logging
-import shutil
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,13 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from ..imaging.engine import marker_key
-from ..imaging.features import ImageFeatures
 from ..runtime import cache
 from ..runtime.executor import make_executor
 from ..runtime.stages import cached
+from ..io_utils import atomic_path
+from .calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
+from .ceiling import SINGLE, ceiling_markdown, ceiling_placements, single_placements
 from .images import BaseImages, TestbedImaging
-from .maps import localize_task, save_map
-from .predictions import load_prediction, save_prediction
+from .predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
 
@@ -135,6 +135,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor)
+        calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress)
         timings["plan_prepare"] = time.perf_counter() - t0
         scene = scene_spec.load()
         map_poses = np.asarray(data.disc.world_from_cam, float)
@@ -152,8 +153,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         timings["placements"] = time.perf_counter() - t0
         log.info("evaluating %d marker sets: %s", len(placements), ", ".join(sorted({p.method for p in placements})))
 
+        diag = config.diagnostics
+        singles = single_placements(data.disc.candidate_world_from_marker, plan_config.placement.tag_size) \
+            if diag.ceiling else []
         test_poses = _test_poses(out, config, plan_config, data, base_key, timings)
-        union = list({marker_key(m): m for p in placements for m in p.markers}.values())
+        union = list({marker_key(m): m for p in placements + singles for m in p.markers}.values())
         tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
         t0 = time.perf_counter()
         map_base = BaseImages(tb, map_poses, cache_dir / "map_base", base_key, True, "map")
@@ -166,147 +170,37 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
                       for ts in config.test.sets}
         timings["queries_no_markers"] = time.perf_counter() - t0
 
-        predictions = _predict_all(tb, placements, map_base, query_base, test_poses, codebook, cb_key, lcfg,
-                                   imaging, cache_dir, timings, reuse_unchanged)
+        sets = {ts: ImageSet(ts, test_poses[ts].world_from_cam, query_base[ts]) for ts in config.test.sets}
+        if diag.calibration:
+            sets[MAP_SET] = map_image_set(map_base, data.disc.location_index)
+        predictions = predict_placements(tb, placements + singles, map_base, sets, codebook, cb_key, lcfg, imaging,
+                                         cache_dir, timings, reuse_unchanged)
+        estimate = None
+        if diag.ceiling:  # the oracle picks from the single-tag outcomes, then evaluated as placements
+            ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
+                                                        plan_config.placement.tag_size, predictions, test_poses,
+                                                        config.study.ks)
+            test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
+            predictions.update(predict_placements(tb, placements[:1] + ceiling_runs, map_base, test_sets, codebook,
+                                                  cb_key, lcfg, imaging, cache_dir, timings, reuse_unchanged))
+            placements = placements + ceiling_runs
 
     t0 = time.perf_counter()
-    rows, summary = write_outputs(out, scene.name, placements, predictions, test_poses, data.base_score, config,
+    test_predictions = {key: est for key, est in predictions.items() if key[0] != SINGLE and key[3] in test_poses}
+    rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
                                   plan_config, scene=scene)
+    if estimate is not None:
+        from .metrics import MAIN_THRESHOLD, threshold_label
+
+        with atomic_path(out / "ceiling.md") as tmp:
+            tmp.write_text(ceiling_markdown(rows, estimate, sorted(set(config.study.ks)), threshold_label(MAIN_THRESHOLD)))
+    if diag.calibration:
+        from ..report.calibration_report import write_calibration_report
+
+        write_calibration_report(out, scene.name, score_outcomes(data, plan_config, placements,
+                                                                  map_successes(predictions, map_poses)))
     timings["report"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
     write_json(out / "timings.json", {k: round(v, 3) for k, v in timings.items()})
     log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in timings.items()))
     return EvaluationResult(rows, summary, timings)
-
-
-class _Retrieval:
-    """The VLAD retrieval of the queries that see no marker, replayed in this process to tell
-    which of them a placement cannot change (exact, see :func:`_predict_all`).
-
-    ``vlad`` (M, D) float32 holds the marker-free map images' VLAD vectors exactly as a
-    worker's :class:`~markerplace.localization.database.MapDatabase` computes them; a
-    placement replaces the rows of its re-rendered images.
-    """
-
-    def __init__(self, codebook, map_base: BaseImages, num_candidates: int):
-        self.codebook = codebook
-        self.n = int(num_candidates)
-        feats = map_base.features
-        self.vlad = np.stack([codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
-                              for i in range(len(feats))]).astype(np.float32) if len(feats) else None
-        self._queries: dict = {}
-
-    def query_vlads(self, name: str, base: BaseImages) -> np.ndarray:
-        if name not in self._queries:
-            feats = base.features
-            self._queries[name] = [self.codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
-                                   for i in range(len(feats))]
-        return self._queries[name]
-
-    def candidates(self, vlad: np.ndarray, query: np.ndarray) -> tuple:
-        from ..localization.vlad import nearest
-
-        return tuple(int(i) for i in nearest(vlad, query, self.n)[0])
-
-
-def _predict_all(tb: TestbedImaging, placements, map_base: BaseImages, query_base: dict, test_poses: dict, codebook,
-                 cb_key: str, lcfg, imaging, cache_dir: Path, timings: dict, reuse: bool = True) -> dict:
-    """Predictions of every placement and test set (stage 6 of the module docstring).
-
-    With ``reuse``, a query that no marker of a placement can change gets the no-marker
-    prediction without localizing again: its view holds none of the placement's markers (so its
-    features and tags are the marker-free ones), the map images its VLAD retrieval returns
-    against this placement's map are the ones it returns against the marker-free map, in the
-    same order, and none of them was re-rendered. The localizer then sees identical inputs
-    (and seeds RANSAC per query), so the result is identical: this skips work, it approximates
-    nothing (``tests/test_testbed.py`` compares both paths).
-    """
-    from ..localization.localizer import LOCALIZERS
-
-    pred_dir = cache_dir / "predictions"
-    timings.setdefault("map_with_markers", 0.0)
-    timings.setdefault("localize", 0.0)
-    predictions: dict[tuple, np.ndarray] = {}
-    feature_cache: dict[tuple, ImageFeatures] = {}
-    name, settings = lcfg
-    conf = LOCALIZERS.lookup(name).default_conf
-    retrieval = None
-    if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
-        retrieval = _Retrieval(codebook, map_base, conf.num_candidates)
-    reused = 0
-    for p in placements:
-        marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]
-        pending = []
-        for ts, tp in test_poses.items():
-            key = cache.hash_of("prediction-v1", cb_key, tp.world_from_cam, marker_arr, lcfg, imaging)
-            est = load_prediction(pred_dir, key)
-            if est is not None:
-                predictions[(p.method, p.run, p.k, ts)] = est
-            else:
-                pending.append((ts, key))
-        if not pending:
-            continue
-        t0 = time.perf_counter()
-        db_dir, changed, feats = _placement_map(tb, p, map_base, feature_cache, codebook,
-                                                cache_dir / f"db_{cache.hash_of(cb_key, marker_arr)}")
-        timings["map_with_markers"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        try:
-            vlad = None
-            if retrieval is not None and p.markers:
-                vlad = retrieval.vlad.copy()
-                for i in changed:
-                    vlad[i] = codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
-            for ts, key in pending:
-                tp = test_poses[ts]
-                qkeys = tb.view_keys(query_base[ts].in_view, p.markers)
-                base = predictions.get(("none", 0, 0, ts))
-                todo = list(range(len(tp)))
-                est = np.full((len(tp), 4, 4), np.nan)
-                if vlad is not None and base is not None:
-                    qv = retrieval.query_vlads(ts, query_base[ts])
-                    same = [i for i in todo if not qkeys[i] and _unchanged(retrieval, vlad, qv[i], changed)]
-                    est[same] = base[same]
-                    reused += len(same)
-                    todo = sorted(set(todo) - set(same))
-                items = [(str(db_dir), lcfg, None if qkeys[i] else query_base[ts].features.image(i), tp.world_from_cam[i],
-                          list(p.markers) if qkeys[i] else []) for i in todo]
-                got = dict(tb.run(localize_task, items, f"localize {ts} {p.method} k={p.k} run {p.run}"))
-                for j, i in enumerate(todo):
-                    est[i] = got[j]
-                save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=ts,
-                                localized=len(todo))
-                predictions[(p.method, p.run, p.k, ts)] = est
-        finally:
-            shutil.rmtree(db_dir, ignore_errors=True)
-        timings["localize"] += time.perf_counter() - t0
-    if reused:
-        log.info("localize: %d queries no placement's markers could change took the no-marker result", reused)
-    return predictions
-
-
-def _unchanged(retrieval: _Retrieval, vlad: np.ndarray, query: np.ndarray, changed: set) -> bool:
-    """The query's retrieval against the placement's map equals the marker-free one and none
-    of the retrieved images changed."""
-    cand = retrieval.candidates(vlad, query)
-    return not (set(cand) & changed) and cand == retrieval.candidates(retrieval.vlad, query)
-
-
-def _placement_map(tb: TestbedImaging, p, map_base: BaseImages, feature_cache: dict, codebook, db_dir: Path):
-    """Write the map database of placement ``p``: marker-free features, except for the images
-    with one of its markers in view, re-rendered (or taken from ``feature_cache``, keyed by
-    image and markers in view, which it updates). Returns the folder, the set of re-rendered
-    image indices and the map's features."""
-    keys = tb.view_keys(map_base.in_view, p.markers)
-    need = [i for i, k in enumerate(keys) if k and (i, k) not in feature_cache]
-    if need:
-        got = tb.render(map_base.world_from_cam, need, p.markers, True, f"map {p.method} k={p.k} run {p.run}")
-        for i in need:
-            feature_cache[(i, keys[i])] = got[i]
-    used = {(i, k) for i, k in enumerate(keys) if k}
-    for stale in [c for c in feature_cache if c not in used]:
-        del feature_cache[stale]
-    feats = map_base.features.with_images({i: feature_cache[(i, k)] for i, k in enumerate(keys) if k}) \
-        if used else map_base.features
-    save_map(db_dir, feats, map_base.world_from_cam, p.markers, codebook.centres)
-    return db_dir, {i for i, _ in used}, feats

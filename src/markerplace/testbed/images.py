@@ -49,9 +49,16 @@ def _in_view_task(engine: ImagingEngine, world_from_cam) -> np.ndarray:
     return engine.in_view(engine.render(world_from_cam, (), rgb=False), "union")
 
 
+def _geometry_key(marker: Marker) -> tuple:
+    """Where a marker is drawn (size and pose, as :func:`~markerplace.imaging.engine.marker_key`
+    without the tag id): whether it is in view does not depend on its id."""
+    return marker_key(marker)[1:]
+
+
 class TestbedImaging:
     """Renders testbed images on an executor: every worker keeps one imaging engine whose
-    ``union`` sample set holds every marker any evaluated placement uses.
+    ``union`` sample set holds every marker pose any evaluated placement uses (one entry per
+    pose and size, whatever the tag id).
 
     Args:
         scene_spec: how workers rebuild the scene.
@@ -65,8 +72,8 @@ class TestbedImaging:
 
     def __init__(self, scene_spec, config, union_markers: Sequence[Marker], executor, progress: bool = True):
         self.config = config
-        self.union = list(union_markers)
-        self.union_index = {marker_key(m): i for i, m in enumerate(self.union)}
+        self.union = list({_geometry_key(m): m for m in union_markers}.values())
+        self.union_index = {_geometry_key(m): i for i, m in enumerate(self.union)}
         T = np.array([m.world_from_marker for m in self.union]).reshape(-1, 4, 4)
         self.samples = marker_points(T, [m.size for m in self.union], grid=config.visibility_grid) \
             if self.union else np.zeros((0, config.visibility_grid ** 2, 3))
@@ -91,13 +98,15 @@ class TestbedImaging:
         items = [(world_from_cam[i], list(markers), map_only) for i in indices]
         return {indices[j]: f for j, f in self.run(_render_task, items, desc)}
 
-    def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple[int, ...]]:
-        """Per image: sorted union indices of ``markers`` in view, from the (N, U) base mask."""
-        idx = np.array([self.union_index[marker_key(m)] for m in markers], dtype=np.int64)
+    def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple]:
+        """Per image: the ``markers`` in view as sorted (union index, tag id) pairs, from the
+        (N, U) base mask (empty: the image equals its marker-free render)."""
+        idx = np.array([self.union_index[_geometry_key(m)] for m in markers], dtype=np.int64)
         if len(idx) == 0:
             return [()] * len(in_view)
+        ids = [int(m.tag_id) for m in markers]
         sub = np.asarray(in_view)[:, idx]
-        return [tuple(sorted(idx[row].tolist())) for row in sub]
+        return [tuple(sorted((int(idx[j]), ids[j]) for j in np.flatnonzero(row))) for row in sub]
 
 
 class BaseImages:

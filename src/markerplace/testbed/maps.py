@@ -59,23 +59,27 @@ def _tag_detections(feats: ImageFeatures) -> list:
             for t, c in zip(feats.tag_ids, feats.tag_corners)]
 
 
-def localize_features(localizer, feats: ImageFeatures):
-    """Localize precomputed query features (extracted once, reused across placements)."""
-    return localizer.localize_features(feats.keypoints, feats.descriptors.astype(np.float32), _tag_detections(feats))
+def localize_features(localizer, feats: ImageFeatures, exclude=None):
+    """Localize precomputed query features (extracted once, reused across placements);
+    ``exclude``: map images left out of retrieval."""
+    return localizer.localize_features(feats.keypoints, feats.descriptors.astype(np.float32), _tag_detections(feats),
+                                       exclude)
 
 
 def localize_task(engine: ImagingEngine, item) -> np.ndarray:
-    """(db folder, (localizer name, settings), features | None, world_from_cam, markers) ->
-    (4, 4) estimate, all NaN on failure. With features None the query is first rendered here
-    with ``markers`` (its view holds some of them)."""
+    """(db folder, (localizer name, settings), features | None, world_from_cam, markers[,
+    exclude]) -> (4, 4) estimate, all NaN on failure. With features None the query is first
+    rendered here with ``markers`` (its view holds some of them); ``exclude`` (map image
+    indices left out of retrieval) localizes a map image against the rest of the map."""
     from ..localization.localizer import get_localizer
 
-    folder, (name, settings), feats, world_from_cam, markers = item
+    folder, (name, settings), feats, world_from_cam, markers = item[:5]
+    exclude = item[5] if len(item) > 5 else None
     if engine.cache.get("db_folder") != (folder, name, settings):
         engine.cache.pop("localizer", None)
         engine.cache["localizer"] = get_localizer(name, load_map_database(folder), engine.K, **dict(settings))
         engine.cache["db_folder"] = (folder, name, settings)
     if feats is None:
         feats = engine.features(engine.render(world_from_cam, markers), tags=True)
-    res = localize_features(engine.cache["localizer"], feats)
+    res = localize_features(engine.cache["localizer"], feats, exclude)
     return np.full((4, 4), np.nan) if res.world_from_cam is None else np.asarray(res.world_from_cam, float)

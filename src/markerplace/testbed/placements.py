@@ -49,12 +49,15 @@ class PlacementRun:
         run: run index (0 for deterministic methods).
         k: number of markers (0 for ``none``).
         markers: the markers as drawn in the scene (after tag scale and shift).
+        test_sets: the test sets it is evaluated on (None: every one); the ceiling's oracle
+            placements are chosen on one test set's images and evaluated on that set only.
     """
 
     method: str
     run: int
     k: int
     markers: tuple
+    test_sets: tuple | None = None
 
 
 def shift_markers(markers: Sequence, shift: float, seed: int) -> list:

@@ -48,7 +48,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     rows = []
     arrays: dict[str, np.ndarray] = {}
     for ts in config.test.sets:
-        keys = [(p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, ts) in results]
+        keys = list(dict.fromkeys((p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, ts) in results))
         for method, run, k in keys:
             t_err, r_err = results[(method, run, k, ts)]
             for label, (tm, rm) in zip(labels, config.thresholds):

@@ -1,0 +1,282 @@
+"""Localizing image sets against each placement's map, skipping what a placement cannot change.
+
+A placement's map (:class:`PlacementMaps`) holds the marker-free map features except for the
+images with one of its markers in view, which are re-rendered (features cached by image and
+markers in view, so OMP's nested prefixes share them). Against that map,
+:func:`localize_set` localizes one image set (test queries, or the map images themselves with
+their own location left out) and reuses the marker-free result of every image no marker of the
+placement can change: its view holds none of the markers (so its features and tags are the
+marker-free ones), the map images its VLAD retrieval returns against this placement's map are
+the ones it returns against the marker-free map, in the same order, and none of them was
+re-rendered. The localizer then sees identical inputs (and seeds RANSAC per query), so the
+result is identical: this skips work, it approximates nothing (``tests/test_testbed.py``
+compares both paths).
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..imaging.features import ImageFeatures
+from ..runtime import cache
+from .images import BaseImages, TestbedImaging
+from .maps import localize_task, save_map
+from .placements import NO_MARKERS
+from .predictions import load_prediction, save_prediction
+
+
+@dataclass(frozen=True, eq=False)
+class ImageSet:
+    """Images localized against every placement's map.
+
+    Attributes:
+        name: the set's name (a test set, or ``map`` for the map images themselves).
+        world_from_cam: (Q, 4, 4) true poses.
+        base: their marker-free features and union-marker in-view mask.
+        exclude: per image, map image indices left out of its retrieval (None: none); the map
+            images leave out their own location.
+        own: the images are the map's own (re-rendered ones come from the placement's map).
+    """
+
+    name: str
+    world_from_cam: np.ndarray
+    base: BaseImages
+    exclude: list | None = None
+    own: bool = False
+
+__all__ = ["ImageSet", "Retrieval", "PlacementMap", "PlacementMaps", "localize_set", "predict_placements"]
+
+log = logging.getLogger(__name__)
+
+
+class Retrieval:
+    """The VLAD retrieval of images that see no marker, replayed in this process to tell which
+    of them a placement cannot change.
+
+    ``vlad`` (M, D) float32 holds the marker-free map images' VLAD vectors exactly as a
+    worker's :class:`~markerplace.localization.database.MapDatabase` computes them; a
+    placement replaces the rows of its re-rendered images.
+    """
+
+    def __init__(self, codebook, map_base: BaseImages, num_candidates: int):
+        self.codebook = codebook
+        self.n = int(num_candidates)
+        feats = map_base.features
+        self.vlad = np.stack([codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
+                              for i in range(len(feats))]).astype(np.float32) if len(feats) else None
+        self._sets: dict = {}
+
+    def image_vlads(self, name: str, features) -> list:
+        """VLAD vectors of the images of a FeatureSet (computed once per ``name``)."""
+        if name not in self._sets:
+            feats = features
+            self._sets[name] = [self.codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
+                                for i in range(len(feats))]
+        return self._sets[name]
+
+    def candidates(self, vlad: np.ndarray, query: np.ndarray, exclude: Sequence[int] = ()) -> tuple:
+        """The localizer's VLAD-only retrieval of ``query`` against the rows of ``vlad``,
+        leaving out ``exclude`` (as :meth:`~markerplace.localization.localizer.Localizer.retrieve`)."""
+        from ..localization.vlad import nearest
+
+        skip = set(int(i) for i in exclude)
+        order = nearest(vlad, query, self.n + len(skip))[0]
+        return tuple(int(i) for i in order if int(i) not in skip)[:self.n]
+
+    def unchanged(self, vlad: np.ndarray, query: np.ndarray, changed: set, exclude: Sequence[int] = ()) -> bool:
+        """The query's retrieval against a placement's map (rows ``vlad``) equals the
+        marker-free one and none of the retrieved images changed."""
+        cand = self.candidates(vlad, query, exclude)
+        return not (set(cand) & changed) and cand == self.candidates(self.vlad, query, exclude)
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementMap:
+    """One placement's map database on disk.
+
+    Attributes:
+        folder: the database folder (:func:`~markerplace.testbed.maps.save_map`).
+        changed: indices of the map images re-rendered with the placement's markers.
+        features: the map's features (marker-free ones where unchanged).
+        vlad: (M, D) the map images' VLAD vectors, or None when no retrieval replay is kept.
+    """
+
+    folder: Path
+    changed: set
+    features: object
+    vlad: np.ndarray | None
+
+
+class PlacementMaps:
+    """Builds the map database of each placement (see the module docstring), keeping the
+    re-rendered features of the images the current placement shares with the previous ones.
+
+    Args:
+        tb: the testbed's imaging.
+        map_base: marker-free map features and the map's in-view masks.
+        codebook: the VLAD codebook.
+        retrieval: the marker-free retrieval replay (None: no reuse of unchanged results).
+    """
+
+    def __init__(self, tb: TestbedImaging, map_base: BaseImages, codebook, retrieval: Retrieval | None):
+        self.tb, self.map_base, self.codebook, self.retrieval = tb, map_base, codebook, retrieval
+        self._features: dict[tuple, ImageFeatures] = {}
+
+    @contextmanager
+    def built(self, markers: Sequence, folder: Path, desc: str):
+        """Write the map database of ``markers`` into ``folder``, yield its
+        :class:`PlacementMap`, and delete the folder afterwards."""
+        tb, base = self.tb, self.map_base
+        keys = tb.view_keys(base.in_view, markers)
+        need = [i for i, k in enumerate(keys) if k and (i, k) not in self._features]
+        if need:
+            got = tb.render(base.world_from_cam, need, markers, True, desc)
+            for i in need:
+                self._features[(i, keys[i])] = got[i]
+        used = {(i, k) for i, k in enumerate(keys) if k}
+        for stale in [c for c in self._features if c not in used]:
+            del self._features[stale]
+        feats = base.features.with_images({i: self._features[(i, k)] for i, k in enumerate(keys) if k}) \
+            if used else base.features
+        changed = {i for i, _ in used}
+        vlad = None
+        if self.retrieval is not None:
+            vlad = self.retrieval.vlad.copy()
+            for i in changed:
+                vlad[i] = self.codebook.vlad(np.asarray(feats.image(i).descriptors, np.float32))
+        save_map(folder, feats, base.world_from_cam, markers, self.codebook.centres)
+        try:
+            yield PlacementMap(Path(folder), changed, feats, vlad)
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg, world_from_cam: np.ndarray,
+                 in_view: np.ndarray, base_features, base_estimates: np.ndarray | None, retrieval: Retrieval | None,
+                 set_name: str, desc: str, exclude: Sequence[Sequence[int]] | None = None,
+                 own_features: bool = False) -> tuple[np.ndarray, int]:
+    """Localize every image of one set against a placement's map.
+
+    Args:
+        tb: the testbed's imaging (its executor runs the localizations).
+        pmap: the placement's map.
+        markers: the placement's markers.
+        lcfg: (localizer name, settings).
+        world_from_cam: (Q, 4, 4) true poses of the images (rendered when they see a marker).
+        in_view: (Q, U) union-marker in-view mask of the images.
+        base_features: the images' marker-free features (a FeatureSet).
+        base_estimates: (Q, 4, 4) marker-free estimates (reused where nothing can change), or
+            None to localize every image.
+        retrieval: the marker-free retrieval replay (None: no reuse).
+        set_name: key of the set's VLAD vectors in ``retrieval``.
+        desc: progress bar label.
+        exclude: per image, map image indices left out of its retrieval (None: none).
+        own_features: the images are the map's own: an image with a marker in view takes its
+            features from the placement's map instead of being rendered again.
+
+    Returns:
+        (Q, 4, 4) estimates (all NaN where localization failed) and the number of images
+        actually localized.
+    """
+    Q = len(world_from_cam)
+    keys = tb.view_keys(in_view, markers)
+    todo = list(range(Q))
+    est = np.full((Q, 4, 4), np.nan)
+    if retrieval is not None and pmap.vlad is not None and base_estimates is not None and markers:
+        qv = retrieval.image_vlads(set_name, base_features)
+        same = [i for i in todo if not keys[i] and retrieval.unchanged(pmap.vlad, qv[i], pmap.changed,
+                                                                       () if exclude is None else exclude[i])]
+        est[same] = base_estimates[same]
+        todo = sorted(set(todo) - set(same))
+
+    def features(i: int):
+        if not keys[i]:
+            return base_features.image(i)
+        return pmap.features.image(i) if own_features else None
+
+    items = []
+    for i in todo:
+        item = (str(pmap.folder), lcfg, features(i), world_from_cam[i], list(markers) if keys[i] else [])
+        items.append(item if exclude is None else item + (tuple(int(j) for j in exclude[i]),))
+    got = dict(tb.run(localize_task, items, desc))
+    for j, i in enumerate(todo):
+        est[i] = got[j]
+    return est, len(todo)
+
+
+
+def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, sets: dict, codebook, cb_key: str, lcfg,
+                       imaging, cache_dir: Path, timings: dict, reuse: bool = True) -> dict:
+    """Estimates of every image set against every placement's map, cached per (placement, set).
+
+    Args:
+        tb: the testbed's imaging (and executor).
+        placements: :class:`~markerplace.testbed.placements.PlacementRun` list; the marker-free
+            one (``none``) first, so that the others can reuse its results. A placement with
+            ``test_sets`` is localized on those sets only (``map`` is always localized).
+        map_base: marker-free map features.
+        sets: name -> :class:`ImageSet`.
+        codebook: the VLAD codebook; ``cb_key`` its cache key (it fixes the map).
+        lcfg: (localizer name, settings).
+        imaging: the testbed's imaging config (part of the cache keys).
+        cache_dir: ``predictions/`` and the temporary map folders go here.
+        timings: ``map_with_markers`` and ``localize`` seconds are added.
+        reuse: reuse the marker-free result where a placement cannot change it (exact).
+
+    Returns:
+        (method, run, k, set name) -> (Q, 4, 4) estimates, NaN where localization failed.
+    """
+    from ..localization.localizer import LOCALIZERS
+
+    pred_dir = cache_dir / "predictions"
+    timings.setdefault("map_with_markers", 0.0)
+    timings.setdefault("localize", 0.0)
+    predictions: dict[tuple, np.ndarray] = {}
+    name, settings = lcfg
+    conf = LOCALIZERS.lookup(name).default_conf
+    retrieval = None
+    if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
+        retrieval = Retrieval(codebook, map_base, conf.num_candidates)
+    maps = PlacementMaps(tb, map_base, codebook, retrieval)
+    reused = 0
+    for p in placements:
+        marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]
+        pending = []
+        for s in sets.values():
+            if p.test_sets is not None and s.name not in p.test_sets and not s.own:
+                continue
+            key = cache.hash_of("prediction-v1", cb_key, s.world_from_cam, marker_arr, lcfg, imaging) if s.exclude is None \
+                else cache.hash_of("map-prediction-v1", cb_key, s.world_from_cam, s.exclude, marker_arr, lcfg, imaging)
+            est = load_prediction(pred_dir, key)
+            if est is not None:
+                predictions[(p.method, p.run, p.k, s.name)] = est
+            else:
+                pending.append((s, key))
+        if not pending:
+            continue
+        t0 = time.perf_counter()
+        with maps.built(p.markers, cache_dir / f"db_{cache.hash_of(cb_key, marker_arr)}",
+                        f"map {p.method} k={p.k} run {p.run}") as pmap:
+            timings["map_with_markers"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            for s, key in pending:
+                est, localized = localize_set(tb, pmap, p.markers, lcfg, s.world_from_cam, s.base.in_view,
+                                              s.base.features, predictions.get((NO_MARKERS, 0, 0, s.name)), retrieval,
+                                              s.name, f"localize {s.name} {p.method} k={p.k} run {p.run}",
+                                              s.exclude, s.own)
+                reused += len(est) - localized
+                save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=s.name,
+                                localized=localized)
+                predictions[(p.method, p.run, p.k, s.name)] = est
+            timings["localize"] += time.perf_counter() - t0
+    if reused:
+        log.info("localize: %d images no placement's markers could change took the no-marker result", reused)
+    return predictions

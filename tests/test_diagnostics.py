@@ -1,0 +1,134 @@
+"""The oracle ceiling, the score's calibration on map images (leave one location out) and the
+expected-recall method that uses it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from markerplace.cli.main import main
+from markerplace.localization.database import MapDatabase
+from markerplace.localization.localizer import Localizer
+from markerplace.localization.vlad import VladCodebook
+from markerplace.markers import Marker
+from markerplace.testbed.ceiling import oracle_order
+from markerplace.testbed.calibration import placement_candidates
+
+FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
+
+
+def _db(M: int = 12, seed: int = 0) -> MapDatabase:
+    rng = np.random.default_rng(seed)
+    codebook = VladCodebook(rng.standard_normal((4, 128)).astype(np.float32))
+    images = []
+    for i in range(M):
+        T = np.eye(4)
+        T[:3, 3] = [i, 0, 1.5]
+        d = np.abs(rng.standard_normal((20, 128))).astype(np.float32)
+        images.append((T, rng.uniform(0, 600, (20, 2)), d, rng.uniform(0, 5, (20, 3)), []))
+    return MapDatabase.build(images, [], codebook)
+
+
+def test_retrieval_leaves_out_excluded_images_and_keeps_the_order_of_the_rest():
+    from markerplace.testbed.predict import Retrieval
+
+    db = _db()
+    loc = Localizer(db, np.eye(3), num_candidates=5)
+    q = db.vlad[3] + 0.1 * db.vlad[7]
+    q /= np.linalg.norm(q)
+    full = loc.retrieve(q, [])
+    assert full[0] == 3 and len(full) == 5
+    cut = loc.retrieve(q, [], exclude=[3, full[1]])
+    assert 3 not in cut and full[1] not in cut and len(cut) == 5
+    order = [i for i in np.argsort(-(db.vlad @ q), kind="stable") if i not in (3, full[1])]
+    assert cut == [int(i) for i in order[:5]]
+    # the in-process replay that decides which images a placement cannot change agrees
+    replay = Retrieval.__new__(Retrieval)
+    replay.n = 5
+    assert list(replay.candidates(db.vlad, q, (3, full[1]))) == cut
+    assert list(replay.candidates(db.vlad, q)) == full
+
+
+def test_oracle_order_is_greedy_maximum_coverage():
+    base = np.array([1, 0, 0, 0, 0, 0], bool)
+    hits = np.array([[1, 1, 0, 0, 0, 0],     # c0 adds 1 (image 0 already localizes)
+                     [0, 1, 1, 1, 0, 0],     # c1 adds 3
+                     [0, 0, 0, 1, 1, 0],     # c2 adds 2, then 1 after c1
+                     [0, 1, 1, 0, 0, 0]], bool)  # c3 adds 2, then 0 after c1
+    order, gains = oracle_order(base, hits, 4)
+    # c1 (+3), then c2 (+1: image 4); c0 and c3 add nothing more: ties to the smaller index
+    assert order == [1, 2, 0, 3] and gains == [3, 1, 0, 0]
+    assert oracle_order(base, hits, 2) == ([1, 2], [3, 1])  # nested in k
+
+
+def test_placement_candidates_match_exactly_or_not_at_all():
+    T = np.stack([np.eye(4) for _ in range(3)])
+    T[:, 0, 3] = [0.0, 1.0, 2.0]
+    assert placement_candidates([Marker(0, 0.4, T[2]), Marker(1, 0.4, T[0])], T).tolist() == [2, 0]
+    moved = T[1].copy()
+    moved[1, 3] += 0.01
+    assert placement_candidates([Marker(0, 0.4, moved)], T) is None
+
+
+@pytest.fixture(scope="module")
+def evaluation(tmp_path_factory):
+    out = tmp_path_factory.mktemp("diag") / "eval"
+    code = main(["evaluate", "tiny", "--out", str(out), "--tests", "12", "--k", "2,3", "--runs", "1",
+                 "--methods", "none,omp,random,expected-recall", "--ceiling", "--calibration", *FAST])
+    assert code == 0
+    return out
+
+
+def test_ceiling_rows_and_shares(evaluation):
+    import csv
+
+    rows = list(csv.DictReader((evaluation / "recall.csv").open()))
+    main_rows = [r for r in rows if r["threshold"] == "5cm/5deg"]
+    methods = {r["method"] for r in main_rows}
+    assert methods == {"none", "omp", "random", "expected-recall", "ceiling"}  # the single-tag runs stay out
+    for ts in ("weighted", "uniform"):
+        ceil = {int(r["k"]): float(r["recall"]) for r in main_rows if r["method"] == "ceiling" and r["test_set"] == ts}
+        assert sorted(ceil) == [2, 3]
+    md = (evaluation / "ceiling.md").read_text()
+    for ts in ("weighted", "uniform"):
+        assert f"## {ts} test set (12 images" in md
+    assert md.count("| ceiling (evaluated) |") == 2 and md.count("| share of omp |") == 2
+    est = [line for line in md.splitlines() if line.startswith("| ceiling (single-tag estimate) |")]
+    none = {r["test_set"]: float(r["recall"]) for r in main_rows if r["method"] == "none"}
+    for line, ts in zip(est, ("weighted", "uniform")):
+        values = [float(v) for v in line.strip("|").split("|")[1:]]
+        # no markers plus what the picks fix alone: never below no markers, growing with k
+        assert values[0] >= 100 * none[ts] - 1e-9 and values[1] >= values[0]
+
+
+def test_calibration_outputs(evaluation):
+    md = (evaluation / "calibration.md").read_text()
+    assert "| paper |" in md and "| corners |" in md and "## corners: calibration" in md
+    z = np.load(evaluation / "map_outcomes.npz")
+    N = 32  # tiny at 1 m x 4 yaws
+    for model in ("paper", "corners"):
+        s, y, tagged = z[f"{model}_score"], z[f"{model}_success"], z[f"{model}_tagged"]
+        assert len(s) == len(y) == len(tagged) and int((~tagged).sum()) == N and tagged.any()
+        assert y.dtype == bool and 0 < y.mean() <= 1
+    assert (evaluation / "calibration.png").stat().st_size > 0
+    # the same tag sets under both models: the same samples, other scores
+    assert np.array_equal(z["paper_success"], z["corners_success"])
+    assert not np.array_equal(z["paper_score"][z["paper_tagged"]], z["corners_score"][z["corners_tagged"]])
+
+
+def test_expected_recall_plan_is_calibrated_on_map_images_and_cached(tmp_path):
+    out = tmp_path / "plan"
+    args = ["plan", "tiny", "-k", "3", "--method", "expected-recall", "--out", str(out), *FAST]
+    assert main(args) == 0
+    model_file = out / "success_model_expected-recall.json"
+    model = json.loads(model_file.read_text())
+    assert model["slope"] >= 0 and model["n"] > 32 and 0 <= model["successes"] <= model["n"]
+    assert (out / "calibration" / "map_base").is_dir()
+    placed = json.loads((out / "placement.json").read_text())["markers"]
+    assert len({tuple(m["position"]) for m in placed}) == 3
+    stamp = model_file.stat().st_mtime_ns
+    assert main(args) == 0  # the calibration stage is reused
+    assert model_file.stat().st_mtime_ns == stamp
+    assert json.loads((out / "placement.json").read_text())["markers"] == placed
