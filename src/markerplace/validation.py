@@ -113,7 +113,8 @@ VOXEL = Bound("--voxel", 0.001, 1.0, "m", "a TSDF voxel edge in metres, e.g. 0.0
 DEPTH_MAX = Bound("--depth-max", 0.1, 100.0, "m", "a depth cut-off in metres, e.g. 4")
 EVERY = Bound("--every", 1, 1_000_000, "", "use every N-th frame, e.g. 1", integer=True)
 MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 0.02")
-MATCH_RADIUS = Bound("--match-radius", 0.01, 100.0, "m", "a distance in metres, e.g. 1.0")
+CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", integer=True)
+MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
 
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
 _PLAN_OPTIONS = {**_SCENE_OPTIONS, "v": V, "tag_size": TAG_SIZE, "height": PLANE_HEIGHT, "level": LEVEL,
@@ -128,7 +129,7 @@ BOUNDS: dict[str, dict[str, Bound]] = {
     "evaluate": {**_PLAN_OPTIONS, "tests": TESTS, "runs": RUNS, "test_seed": TEST_SEED, "tag_scale": TAG_SCALE,
                  "shift": SHIFT},
     "study": {**_PLAN_OPTIONS, "tests": TESTS, "test_seed": TEST_SEED},
-    "check": {"match_radius": MATCH_RADIUS, "workers": WORKERS},
+    "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
 }
 """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
 pixels, ``plan --height`` metres). Comma-separated options are parsed by :func:`parse_floats` /

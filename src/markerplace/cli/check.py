@@ -5,16 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import UserError
-
 
 def cmd_check(args: argparse.Namespace) -> int:
     from ..report.check_report import run_check
 
-    if not 0.05 <= args.match_radius <= 20:
-        raise UserError(f"--match-radius {args.match_radius:g} m is out of range: give 0.05-20 metres")
-    if not 1 <= args.workers <= 256:
-        raise UserError(f"--workers {args.workers} is out of range: give 1-256 processes")
     _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, workers=args.workers,
                         progress=not args.quiet)
     print(text)

@@ -17,7 +17,7 @@ __all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_c
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
-    p.add_argument("--up", default=None, help="up axis of an OBJ/PLY file: z (default), y, -y, x, -x, -z; glTF is always y-up")
+    p.add_argument("--up", default=None, help="up axis of the mesh file: z, y, -y, x, -x, -z (default: y for glTF, its specification; z for OBJ/PLY)")
     p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
     p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")
 

@@ -50,7 +50,7 @@ def add_study_parser(subparsers) -> argparse.ArgumentParser:
         description="Evaluations of OMP with one setting changed from the default each, sharing one work folder: "
                     "v, tag detection on/off, low-scoring vs uniform test images, similarity analysis on/off, tags "
                     "shifted along their walls, tags printed at other sizes. Tables with paired differences to the "
-                    "default (95 %% bootstrap intervals) and one figure per group.")
+                    "default (95 % bootstrap intervals) and one figure per group.")
     add_scene_args(p)
     p.add_argument("--out", required=True, help="study folder (runs/, work/ caches; an interrupted study resumes)")
     p.add_argument("--tests", type=int, default=300, help="test images per test set (default 300)")

@@ -133,10 +133,8 @@ def _user(T, offset):
 
 def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
     from ..scene.worldframe import discretization_to_user
-    from .deliverables import field_extent
+    from .deliverables import write_known_tag_maps
     from .figures import floor_map, per_location_mean
-    from .tagmaps import write_tag_maps
-    from ..scene.source import world_from_file_rotation
 
     out.mkdir(parents=True, exist_ok=True)
     disc = discretization_to_user(result.disc, offset)
@@ -193,9 +191,8 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
               markers_xy=inst[:, :2], markers_normal=np.array([m.normal[:2] for m in installed_user]).reshape(-1, 2),
               marker_labels=[str(m.tag_id) for m in installed_user], marker_panel=panel(inst[:, 2]),
               candidates_xy=plan_xyz[:, :2], candidate_panel=panel(plan_xyz[:, 2]))
-    write_tag_maps(out / "tagmaps", list(installed_user) + list(folder.existing), name="installed",
-                   field=field_extent(disc), world_from_file=world_from_file_rotation(folder.scene,
-                                                                                       folder.scene_options.get("up")))
+    write_known_tag_maps(out / "tagmaps", list(installed_user) + list(folder.existing), "installed", disc,
+                         folder.scene, folder.scene_options.get("up"))
     return _text(out, summary, rows, worst_rows)
 
 

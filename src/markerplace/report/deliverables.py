@@ -16,7 +16,7 @@ import numpy as np
 from .pdf import write_tags_pdf
 from .tagmaps import write_tag_maps
 
-__all__ = ["write_deliverables", "field_extent"]
+__all__ = ["write_deliverables", "write_known_tag_maps", "field_extent"]
 
 
 def field_extent(disc) -> tuple[float, float]:
@@ -36,17 +36,24 @@ def write_deliverables(out_dir: str | Path, records: Sequence[dict], markers: Se
     ``scene_options`` (``up``, ``unit_scale``, ``seed``) tells the file's axes: for a mesh file
     whose up axis is not z (every glTF) the maps are also written in the file's axes.
     """
-    from ..scene.source import file_up_axis, world_from_file_rotation
-
     out_dir = Path(out_dir)
     write_tags_pdf(out_dir / "tags.pdf", records, paper)
-    up = (scene_options or {}).get("up")
-    axis = file_up_axis(scene_source, up)
     name = re.sub(r"\W+", "_", Path(str(scene_source)).stem).strip("_") or "markerplace"
-    folder = out_dir / "tagmaps"
-    written = write_tag_maps(folder, list(markers) + list(existing), name=name, field=field_extent(disc),
+    write_known_tag_maps(out_dir / "tagmaps", list(markers) + list(existing), name, disc, scene_source,
+                         (scene_options or {}).get("up"))
+
+
+def write_known_tag_maps(folder: Path, markers: Sequence, name: str, disc, scene_source: str, up: str | None) -> list:
+    """``tagmaps/``: the known-tag maps of ``markers`` (user frame) in the model frame and, for a
+    file whose up axis is not z, in the file's axes (``*_<axis>up.*``); maps an earlier run left
+    in other axes are removed. Returns the files written."""
+    from ..scene.source import file_up_axis, world_from_file_rotation
+
+    axis = file_up_axis(scene_source, up)
+    written = write_tag_maps(folder, list(markers), name=name, field=field_extent(disc),
                              world_from_file=world_from_file_rotation(scene_source, up),
                              file_suffix=f"_{axis.replace('-', 'neg')}up" if axis else "_yup")
-    for old in set(folder.glob("*")) - set(written):  # maps of an earlier plan in other axes
+    for old in set(Path(folder).glob("*")) - set(written):  # maps of an earlier run in other axes
         if old.is_file():
             old.unlink()
+    return written

@@ -4,7 +4,7 @@ codebook: everything their inputs have in common is computed once).
 
 Groups (one setting changed from the default each; recall at the main threshold):
 
-* ``v``: OMP with v = 90 (default), 99, 70, 50 (extra placements of the default run);
+* ``v``: OMP with the planned v (default 90) and 99, 70, 50 (extra placements of the default run);
 * ``detection``: tag detection in the localizer on (default) / off (a run with ``use_tags`` off);
 * ``test data``: low-scoring (weighted, default) / uniform test images (two test sets of the
   default run; different images, so no paired difference);
@@ -121,7 +121,7 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
     hits = {name: {ts: _hits(out / "runs" / name, ts, threshold) for ts in cfg.test.sets}
             for name, (cfg, _) in runs.items()}
     default_w = hits["default"]["weighted"]
-    groups = _groups(hits, plan)
+    groups = _groups(hits, plan, plan_config.placement.v)
     md = _markdown(groups, default_w, ks, label, config.seed)
     _write_csv(out / "study.csv", groups, ks)
     _figures(out, groups, ks, label)
@@ -130,7 +130,7 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
     return md
 
 
-def _groups(hits: dict, plan: StudyPlan) -> list[tuple[str, list]]:
+def _groups(hits: dict, plan: StudyPlan, v_default: float) -> list[tuple[str, list]]:
     """(group, [(row label, {(k): hits}, paired with the default?)])."""
     def series(h: dict, method: str) -> dict:
         out = {0: h[("none", 0, 0)]} if ("none", 0, 0) in h else {}
@@ -139,7 +139,7 @@ def _groups(hits: dict, plan: StudyPlan) -> list[tuple[str, list]]:
 
     dw, du = hits["default"]["weighted"], hits["default"]["uniform"]
     base = series(dw, "omp")
-    groups = [("v", [("v = 90 (default)", base, True)] + [(f"v = {v:g}", {0: base[0], **series(dw, f"omp-v{v:g}")}, True)
+    groups = [("v", [(f"v = {v_default:g} (default)", base, True)] + [(f"v = {v:g}", {0: base[0], **series(dw, f"omp-v{v:g}")}, True)
                                                       for v in plan.vs])]
     if "no-detection" in hits:
         groups.append(("detection", [("tag detection on (default)", base, True),
