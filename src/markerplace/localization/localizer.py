@@ -37,7 +37,7 @@ from .database import MapDatabase
 from .features import SIFT_DEFAULT, SiftConfig, extract_sift
 from .pnp import PnPConfig, estimate_pose
 from .tags import TagDetection, detect_tags, pose_from_tag
-from .vlad import nearest
+from .vlad import nearest_by_similarity
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +138,7 @@ class Localizer:
         n = self.config.num_candidates
         if len(self.db) == 0 or n <= 0:
             return []
-        sims = self.db.vlad @ query_vlad
+        sims = self.db.vlad @ np.asarray(query_vlad, dtype=self.db.vlad.dtype)  # as vlad.nearest computes it
         out: list[int] = []
         excluded = np.zeros(len(self.db), bool)
         if exclude is not None:
@@ -160,7 +160,7 @@ class Localizer:
             out = out[:n]
         if len(out) < n:
             taken = set(out)
-            order, _ = nearest(self.db.vlad, query_vlad, n + len(out) + int(excluded.sum()))
+            order, _ = nearest_by_similarity(sims, n + len(out) + int(excluded.sum()))
             out.extend(int(i) for i in order if int(i) not in taken and not excluded[i])
             out = out[:n]
         return out
@@ -190,11 +190,13 @@ class Localizer:
             d2 = q @ (-2.0 * desc.T)
             d2 += qq[:, None]
             d2 += np.einsum("ij,ij->i", desc, desc)[None, :]
-            two = np.argpartition(d2, 1, axis=1)[:, :2]
-            a, b = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
-            swap = b < a
-            first = np.where(swap, two[:, 1], two[:, 0])
-            d1, d2nd = np.maximum(np.minimum(a, b), 0.0), np.maximum(np.maximum(a, b), 0.0)
+            # the two smallest per row (argmin, then the minimum of the rest: faster than
+            # argpartition on these small rows; equal distances fail the ratio test either way)
+            first = np.argmin(d2, axis=1)
+            a = d2[rows, first]
+            d2[rows, first] = np.inf
+            b = d2.min(axis=1)
+            d1, d2nd = np.maximum(a, 0.0), np.maximum(b, 0.0)
             ok = (d1 < r2 * d2nd) & (d1 < best_d2)
             best_d2[ok] = d1[ok]
             best_pt[ok] = pts[first[ok]]

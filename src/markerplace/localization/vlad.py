@@ -151,6 +151,16 @@ class VladCodebook:
             return cls(np.asarray(f["centres"], dtype=np.float32))
 
 
+def nearest_by_similarity(sims: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Top-k of (M,) similarities ``sims``: (k',) indices and similarities, best first
+    (k' = min(k, M)); ties keep the lower index first (as :func:`nearest`)."""
+    sims = np.asarray(sims)
+    if len(sims) == 0 or k <= 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.float32)
+    order = np.argsort(-sims, kind="stable")[:min(int(k), len(sims))]
+    return order.astype(np.int64), sims[order].astype(np.float32)
+
+
 def nearest(db: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Top-k rows of (M, D) unit vectors ``db`` by dot product with (D,) ``query``.
 
@@ -160,7 +170,4 @@ def nearest(db: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.n
     db = np.asarray(db)
     if len(db) == 0 or k <= 0:
         return np.zeros(0, np.int64), np.zeros(0, np.float32)
-    sims = db @ np.asarray(query, dtype=db.dtype)
-    k = min(int(k), len(sims))
-    order = np.argsort(-sims, kind="stable")[:k]
-    return order.astype(np.int64), sims[order].astype(np.float32)
+    return nearest_by_similarity(db @ np.asarray(query, dtype=db.dtype), k)

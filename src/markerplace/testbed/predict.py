@@ -52,7 +52,8 @@ class ImageSet:
     exclude: list | None = None
     own: bool = False
 
-__all__ = ["ImageSet", "Retrieval", "PlacementMap", "PlacementMaps", "localize_set", "predict_placements"]
+__all__ = ["ImageSet", "Retrieval", "RenderedFeatures", "PlacementMap", "PlacementMaps", "localize_set",
+           "predict_placements"]
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +116,31 @@ class PlacementMap:
     vlad: np.ndarray | None
 
 
+class RenderedFeatures:
+    """Features of the images of one set rendered with markers, keyed by (image, markers in
+    view): an image is rendered again only when the markers in its view change, so nested
+    placements (OMP's prefixes) share the renders of the images whose view they do not change.
+    Only the current placement's entries are kept."""
+
+    def __init__(self):
+        self._features: dict[tuple, ImageFeatures] = {}
+
+    def update(self, tb: TestbedImaging, world_from_cam: np.ndarray, keys: list, markers: Sequence, map_only: bool,
+               desc: str, indices: Sequence[int] | None = None) -> dict[int, ImageFeatures]:
+        """Features of every image of ``indices`` (default all) with markers in view
+        (``keys``, :meth:`TestbedImaging.view_keys`), rendering the ones not held yet."""
+        idx = range(len(keys)) if indices is None else indices
+        used = {(i, keys[i]) for i in idx if keys[i]}
+        need = sorted(i for i, _ in used if (i, keys[i]) not in self._features)
+        if need:
+            got = tb.render(world_from_cam, need, markers, map_only, desc)
+            for i in need:
+                self._features[(i, keys[i])] = got[i]
+        for stale in [c for c in self._features if c not in used]:
+            del self._features[stale]
+        return {i: self._features[(i, k)] for i, k in used}
+
+
 class PlacementMaps:
     """Builds the map database of each placement (see the module docstring), keeping the
     re-rendered features of the images the current placement shares with the previous ones.
@@ -128,7 +154,7 @@ class PlacementMaps:
 
     def __init__(self, tb: TestbedImaging, map_base: BaseImages, codebook, retrieval: Retrieval | None):
         self.tb, self.map_base, self.codebook, self.retrieval = tb, map_base, codebook, retrieval
-        self._features: dict[tuple, ImageFeatures] = {}
+        self._features = RenderedFeatures()
 
     @contextmanager
     def built(self, markers: Sequence, folder: Path, desc: str):
@@ -136,17 +162,9 @@ class PlacementMaps:
         :class:`PlacementMap`, and delete the folder afterwards."""
         tb, base = self.tb, self.map_base
         keys = tb.view_keys(base.in_view, markers)
-        need = [i for i, k in enumerate(keys) if k and (i, k) not in self._features]
-        if need:
-            got = tb.render(base.world_from_cam, need, markers, True, desc)
-            for i in need:
-                self._features[(i, keys[i])] = got[i]
-        used = {(i, k) for i, k in enumerate(keys) if k}
-        for stale in [c for c in self._features if c not in used]:
-            del self._features[stale]
-        feats = base.features.with_images({i: self._features[(i, k)] for i, k in enumerate(keys) if k}) \
-            if used else base.features
-        changed = {i for i, _ in used}
+        rendered = self._features.update(tb, base.world_from_cam, keys, markers, True, desc)
+        feats = base.features.with_images(rendered) if rendered else base.features
+        changed = set(rendered)
         vlad = None
         if self.retrieval is not None:
             vlad = self.retrieval.vlad.copy()
@@ -162,7 +180,7 @@ class PlacementMaps:
 def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg, world_from_cam: np.ndarray,
                  in_view: np.ndarray, base_features, base_estimates: np.ndarray | None, retrieval: Retrieval | None,
                  set_name: str, desc: str, exclude: Sequence[Sequence[int]] | None = None,
-                 own_features: bool = False) -> tuple[np.ndarray, int]:
+                 own_features: bool = False, rendered: RenderedFeatures | None = None) -> tuple[np.ndarray, int]:
     """Localize every image of one set against a placement's map.
 
     Args:
@@ -181,6 +199,8 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
         exclude: per image, map image indices left out of its retrieval (None: none).
         own_features: the images are the map's own: an image with a marker in view takes its
             features from the placement's map instead of being rendered again.
+        rendered: the set's renders with markers, kept between placements (None: render every
+            image with a marker in view in the worker that localizes it).
 
     Returns:
         (Q, 4, 4) estimates (all NaN where localization failed) and the number of images
@@ -192,15 +212,21 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
     est = np.full((Q, 4, 4), np.nan)
     if retrieval is not None and pmap.vlad is not None and base_estimates is not None and markers:
         qv = retrieval.image_vlads(set_name, base_features)
-        same = [i for i in todo if not keys[i] and retrieval.unchanged(pmap.vlad, qv[i], pmap.changed,
-                                                                       () if exclude is None else exclude[i])]
+        # (an image whose marker-free render shows a tag takes the localizer's tag path, which
+        # depends on the placement: never reused)
+        same = [i for i in todo if not keys[i] and not len(base_features.image(i).tag_ids)
+                and retrieval.unchanged(pmap.vlad, qv[i], pmap.changed, () if exclude is None else exclude[i])]
         est[same] = base_estimates[same]
         todo = sorted(set(todo) - set(same))
+    with_markers = {}
+    if rendered is not None and not own_features:
+        with_markers = rendered.update(tb, world_from_cam, keys, markers, False, f"render {desc[len('localize '):]}",
+                                       todo)
 
     def features(i: int):
         if not keys[i]:
             return base_features.image(i)
-        return pmap.features.image(i) if own_features else None
+        return pmap.features.image(i) if own_features else with_markers.get(i)
 
     items = []
     for i in todo:
@@ -240,12 +266,15 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
     timings.setdefault("map_with_markers", 0.0)
     timings.setdefault("localize", 0.0)
     predictions: dict[tuple, np.ndarray] = {}
+    from ..registry import configure
+
     name, settings = lcfg
-    conf = LOCALIZERS.lookup(name).default_conf
+    conf = configure(LOCALIZERS.lookup(name).default_conf, dict(settings))
     retrieval = None
     if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
         retrieval = Retrieval(codebook, map_base, conf.num_candidates)
     maps = PlacementMaps(tb, map_base, codebook, retrieval)
+    rendered = {s.name: RenderedFeatures() for s in sets.values()}
     reused = 0
     for p in placements:
         marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]
@@ -271,7 +300,7 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
                 est, localized = localize_set(tb, pmap, p.markers, lcfg, s.world_from_cam, s.base.in_view,
                                               s.base.features, predictions.get((NO_MARKERS, 0, 0, s.name)), retrieval,
                                               s.name, f"localize {s.name} {p.method} k={p.k} run {p.run}",
-                                              s.exclude, s.own)
+                                              s.exclude, s.own, rendered[s.name])
                 reused += len(est) - localized
                 save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=s.name,
                                 localized=localized)
