@@ -66,10 +66,14 @@ def test_oracle_order_is_greedy_maximum_coverage():
 def test_placement_candidates_match_exactly_or_not_at_all():
     T = np.stack([np.eye(4) for _ in range(3)])
     T[:, 0, 3] = [0.0, 1.0, 2.0]
-    assert placement_candidates([Marker(0, 0.4, T[2]), Marker(1, 0.4, T[0])], T).tolist() == [2, 0]
+    assert placement_candidates([Marker(0, 0.4, T[2]), Marker(1, 0.4, T[0])], T, 0.4).tolist() == [2, 0]
+    rounded = np.round(T[1], 6)  # as placement.json stores it
+    rounded[0, 3] += 4e-7
+    assert placement_candidates([Marker(0, 0.4, rounded)], T, 0.4).tolist() == [1]
     moved = T[1].copy()
     moved[1, 3] += 0.01
-    assert placement_candidates([Marker(0, 0.4, moved)], T) is None
+    assert placement_candidates([Marker(0, 0.4, moved)], T, 0.4) is None
+    assert placement_candidates([Marker(0, 0.5, T[1])], T, 0.4) is None  # printed at another size
 
 
 @pytest.fixture(scope="module")

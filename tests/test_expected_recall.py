@@ -241,10 +241,13 @@ def test_existing_ties_and_errors() -> None:
     dup = [covs[first], MarkerCoverage(np.zeros(0, int), np.zeros((0, 6, 6))), covs[first]]
     r = expected_recall_greedy(base, dup, 3, model)
     assert r.order[0] == 0 and r.gains[0] == res.gains[0]
-    # A constant model (slope 0): nothing gains, picks go in index order.
+    # A constant model (slope 0): nothing gains; picks go by the mean information gain (not
+    # blindly in index order, which could put every tag on one wall).
     flat = SuccessModel(0.0, 0.0, 10, 10, float("nan"), 0.0)
     r = expected_recall_greedy(base, covs, 4, flat)
-    assert r.order == [0, 1, 2, 3] and r.gains == [0.0] * 4
+    first_means = [np.sum(entropy(base[c.pose_idx]) - entropy(base[c.pose_idx] + c.info)) / len(base) for c in covs]
+    assert r.gains == [0.0] * 4 and r.order[0] == int(np.argmax(first_means))
+    assert r.mean_gains[0] == pytest.approx(max(first_means))
     for k in [0, -1, 9, 2.5]:
         with pytest.raises(UserError):
             expected_recall_greedy(base, covs, k, model)

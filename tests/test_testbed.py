@@ -197,7 +197,10 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     # same test poses for every method: one file per test set, identical on a re-run
     poses = tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam
     results = sorted((out / "cache" / "predictions").glob("*.npz"))
-    assert len(results) == 12
+    sets = [json.loads(p.with_name(p.name + ".meta.json").read_text())["test_set"] for p in results]
+    # 6 marker sets x 2 test sets, and expected-recall's calibration on the map images: none and one
+    # tag set (tiny has 11 candidates, so its 3 draws of min(20, 11) are one set)
+    assert sorted(sets) == ["map"] * 2 + ["uniform"] * 6 + ["weighted"] * 6
     stamps = [p.stat().st_mtime_ns for p in results]
     assert main(args) == 0  # resume: every placement's predictions are reused
     assert [p.stat().st_mtime_ns for p in results] == stamps

@@ -82,7 +82,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..markers import check_markers_on_walls, load_markers
     from ..scene.spec import SceneSpec
-    from ..plan.planner import first_pick_gain, place, prepare, validate
+    from ..plan.planner import check_k, first_pick_gain, place, prepare, validate
     from ..report.plan_outputs import write_plan_outputs
     from ..output_checks import check_output_dir
     from ..scene.worldframe import markers_to_internal, world_offset
@@ -103,6 +103,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     with make_executor(run_config.runtime) as executor:
         data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
+        check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,

@@ -91,8 +91,9 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
     """Greedy placement maximizing the expected number of poses that localize (plain greedy).
 
     Each of the k rounds evaluates ``Delta(m | S)`` (module docstring) for every remaining
-    candidate and picks the largest; equal gains go to the smallest candidate index. Lazy
-    evaluation is not offered: the objective is not submodular (convex part of the logistic).
+    candidate and picks the largest; equal gains (a constant model gives all zero) go to the
+    larger mean information gain, then to the smallest candidate index. Lazy evaluation is
+    not offered: the objective is not submodular (convex part of the logistic).
 
     Args:
         base_info: (N, 6, 6) SPD information of every feasible pose without candidate markers
@@ -134,7 +135,9 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
         cands = np.flatnonzero(remaining)
         dg, mg = prob.expected_gains(cands)
         evaluations += len(cands)
-        i = int(np.argmax(dg))  # cands ascending: first maximum is the smallest index
+        # the largest expected gain; equal ones (e.g. a constant model: all zero) go to the
+        # larger mean information gain, then to the smallest index (cands ascending)
+        i = int(np.lexsort((-mg, -dg))[0])
         m = int(cands[i])
         remaining[m] = False
         prob.add(coverages[m])

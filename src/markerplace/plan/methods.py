@@ -52,8 +52,9 @@ class Choice:
     Attributes:
         order: (k,) int64 candidate indices (into ``data.coverages[:num_candidates]``), in
             placement order, distinct.
-        gains: (k,) localizability gain of each pick when it was chosen, nats (NaN where the
-            method has no gains).
+        gains: (k,) gain of each pick when it was chosen in the method's own objective: nats of
+            localizability for ``omp``, expected poses that localize for ``expected-recall``
+            (NaN where the method has no gains).
         q: the percentile the gains are taken at (NaN where the method has none).
         info_after: (N, 6, 6) information per pose with the existing and the chosen markers.
     """

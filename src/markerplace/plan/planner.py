@@ -281,15 +281,20 @@ class Placement:
     q: float
 
 
+def check_k(k: int, num_candidates: int) -> None:
+    """Raise :class:`UserError` when ``k`` markers cannot be placed on ``num_candidates`` spots."""
+    if k > num_candidates:
+        raise UserError(f"{k} markers requested but only {num_candidates} candidate marker poses were found: ask for "
+                        "fewer markers or reduce --marker-spacing")
+
+
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
     """Choose ``config.k`` markers among the candidates with the method ``config.method``
     (:func:`~markerplace.plan.methods.method_from_config`), seeded with ``config.seed``.
 
     With ``progress``, each OMP pick is logged (candidate, gain) as it is made.
     """
-    C = data.num_candidates
-    if config.k > C:
-        raise UserError(f"{config.k} markers requested but only {C} candidate marker poses were found: ask for fewer markers or reduce --marker-spacing")
+    check_k(config.k, data.num_candidates)
     choice = method_from_config(config).place(data, config.k, seed=config.seed, progress=progress)
     order = np.asarray(choice.order, dtype=np.int64)
     used = {m.tag_id for m in existing}

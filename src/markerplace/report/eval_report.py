@@ -44,7 +44,7 @@ def _plan_method(placements) -> str | None:
     methods = [p.method for p in placements if p.k > 0]
     if "omp" in methods:
         return "omp"
-    others = [m for m in methods if m != NO_MARKERS and m not in baseline_methods()]
+    others = [m for m in methods if m not in (NO_MARKERS, "ceiling") and m not in baseline_methods()]
     return others[0] if others else None
 
 

@@ -3,8 +3,9 @@ the map, and the success model fitted on them.
 
 Each map image (a feasible pose) is localized by the testbed's localizer against the map
 without the images of its own camera location (leave-one-location-out: the nearest map images
-left are a grid step away, as for a test image), without markers and with the markers of a
-tag set in view (re-rendered, as the testbed does). A success is an estimate within the main
+left are a grid step away, a test image's are at most one), without markers and with the
+markers of a tag set in view (re-rendered, as the testbed does). As a query, a map image uses
+its map features (keypoints with a 3D point), a few less than a test image's. A success is an estimate within the main
 recall threshold (5 cm, 5 deg) of the image's true pose. Only map images take part: test images
 never touch a fit.
 
@@ -13,8 +14,9 @@ never touch a fit.
   ``calibration_runs`` seeded random sets of ``calibration_k`` candidate tags, and a
   :class:`~markerplace.plan.success_model.SuccessModel` is fitted on the pairs (score under the
   method's marker model, success): every map image without tags, plus with each set the images
-  whose score the set changes. Cached in the plan folder (``calibration/``,
-  ``success_model_<method>.json``).
+  whose score the set changes (the sets are distinct). Cached in the plan folder
+  (``calibration/``, ``success_model_<method>.json``); the localizer has the testbed's default
+  settings (tag detection on), seeded with ``calibration_seed``.
 * :func:`score_outcomes` gives, for ``evaluate --calibration``, the same pairs for every evaluated
   placement made of candidates and for each marker model, from which
   :mod:`markerplace.report.calibration_report` draws calibration curves and AUCs.
@@ -31,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.config import SIFT_DEFAULT
 from ..imaging.engine import marker_key
 from ..io_utils import write_json
 from ..markers import FAMILY, Marker
 from ..runtime import cache
 from ..runtime.stages import cached
 from .images import BaseImages, TestbedImaging
+from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from .metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 from .placements import NO_MARKERS, PlacementRun
 from .predict import ImageSet, predict_placements
@@ -74,15 +76,18 @@ def map_successes(predictions: dict, map_poses: np.ndarray, threshold=MAIN_THRES
     return out
 
 
-def placement_candidates(markers, candidate_world_from_marker: np.ndarray, atol: float = 1e-9) -> np.ndarray | None:
-    """(k,) candidate index of each marker (its pose equals the candidate's), or None when some
-    marker is not a candidate (a placement file, a shifted tag)."""
+def placement_candidates(markers, candidate_world_from_marker: np.ndarray, tag_size: float,
+                         atol: float = 1e-5) -> np.ndarray | None:
+    """(k,) candidate index of each marker (its pose equals the candidate's within ``atol``,
+    above the 1e-6 rounding of placement.json, and its size is ``tag_size``), or None when some
+    marker is not a candidate (a shifted tag, one printed at another size, a placement file
+    with its own spots)."""
     cands = np.asarray(candidate_world_from_marker, float).reshape(-1, 16)
     out = []
     for m in markers:
         d = np.abs(cands - np.asarray(m.world_from_marker, float).reshape(1, 16)).max(axis=1)
         j = int(np.argmin(d)) if len(d) else -1
-        if j < 0 or d[j] > atol:
+        if j < 0 or d[j] > atol or abs(float(m.size) - float(tag_size)) > 1e-9:
             return None
         out.append(j)
     return np.asarray(out, dtype=np.int64)
@@ -113,16 +118,8 @@ def _pairs(data, coverages, success: dict, sets: dict) -> tuple[np.ndarray, np.n
     return np.concatenate(s), np.concatenate(y).astype(bool), np.concatenate(tagged)
 
 
-def _imaging(plan_config):
-    return replace(plan_config.imaging, sift=SIFT_DEFAULT)
-
-
-def _localizer_spec(seed: int) -> tuple:
-    return "sift_pnp", (("use_tags", True), ("tag_corners", False), ("seed", int(seed)))
-
-
 def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor, methods=None,
-                   progress: bool = True) -> None:
+                   progress: bool = True, cache_dir: str | Path | None = None, imaging_config=None) -> None:
     """Fill ``data.calibration[name]`` (the fitted model and the method's coverages) for every
     calibrated method in ``methods`` (names; default ``plan_config.placement.method``).
 
@@ -130,18 +127,24 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         scene_spec: the scene.
         data: the prepared plan (:func:`markerplace.plan.planner.prepare`); updated in place.
         plan_config: the plan's settings.
-        run_dir: the plan folder (``calibration/`` and ``success_model_<method>.json`` go here).
+        run_dir: the plan folder (``success_model_<method>.json`` goes here).
         executor: where renders and localizations run.
         methods: placement method names about to be placed.
         progress: progress bars.
+        cache_dir: folder of the marker-free map features, the VLAD codebook and the
+            predictions (default ``run_dir/calibration``); ``evaluate`` passes its own cache, so
+            the map is rendered and the codebook trained once for both
+            (:mod:`markerplace.testbed.map_setup`).
+        imaging_config: the testbed's imaging (default: the plan's camera, OpenCV SIFT).
     """
-    from ..localization.vlad import VladCodebook
     from ..plan.methods import PLACEMENT_METHODS, get_placement_method
     from ..plan.planner import coverages_with_model
     from ..plan.success_model import SuccessModel, fit_success_model
+    from .config import LocalizationConfig
 
     names = [plan_config.placement.method] if methods is None else list(methods)
     run_dir = Path(run_dir)
+    folder = run_dir / "calibration" if cache_dir is None else Path(cache_dir)
     for name in dict.fromkeys(names):
         cls = PLACEMENT_METHODS.get(name)
         if cls is None or not cls.calibrated or name in data.calibration:
@@ -151,30 +154,31 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         C = data.num_candidates
         kc = min(C, int(conf.calibration_k))
         rng = np.random.default_rng(conf.calibration_seed)
-        sets = {("calibration", r, kc): np.sort(rng.choice(C, size=kc, replace=False)) for r in range(conf.calibration_runs)}
-        imaging = _imaging(plan_config)
-        lcfg = _localizer_spec(conf.calibration_seed)
+        drawn = {tuple(np.sort(rng.choice(C, size=kc, replace=False)).tolist()) for _ in range(conf.calibration_runs)} \
+            if kc else set()
+        sets = {("calibration", r, kc): np.asarray(c, np.int64) for r, c in enumerate(sorted(drawn))}  # distinct sets
+        imaging = testbed_imaging_config(plan_config, imaging_config)
+        localization = LocalizationConfig()
+        lcfg = localizer_spec(localization, conf.calibration_seed)
         map_poses = np.asarray(data.disc.world_from_cam, float)
-        base_key = cache.hash_of("calibration-v1", cache.scene_hash(scene_spec.load()), map_poses, imaging)
-        key = cache.hash_of(base_key, data.base_score, conf, plan_config.noise, [cv.pose_idx for cv in covs],
-                            data.disc.location_index, MAIN_THRESHOLD)
+        base_key = map_base_key(scene_spec.load(), map_poses)
+        tag_size = plan_config.placement.tag_size
+        key = cache.hash_of("calibration-v2", base_key, imaging, lcfg, localization.vlad_clusters, data.base_score, conf,
+                            tag_size, data.disc.candidate_world_from_marker, data.disc.location_index,
+                            [(cv.pose_idx, cv.info) for cv in covs], sorted(drawn), MAIN_THRESHOLD)
 
         def fit() -> SuccessModel:
             placements = [PlacementRun(NO_MARKERS, 0, 0, ())]
             for (m, r, k), cands in sets.items():
                 placements.append(PlacementRun(m, r, k, tuple(
-                    Marker(i, plan_config.placement.tag_size, data.disc.candidate_world_from_marker[c].copy(), FAMILY)
+                    Marker(i, tag_size, data.disc.candidate_world_from_marker[c].copy(), FAMILY)
                     for i, c in enumerate(cands))))
             union = list({marker_key(mk): mk for p in placements for mk in p.markers}.values())
             tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
-            folder = run_dir / "calibration"
-            map_base = BaseImages(tb, map_poses, folder / "map_base", base_key, True, "calibration map")
+            map_base = map_images(tb, map_poses, folder, base_key)
             timings: dict = {}
-            cb_key = cache.hash_of("vlad-v1", base_key, 64, conf.calibration_seed)
-            codebook = cached("vlad_codebook", folder / "vlad_codebook.npz", cb_key,
-                              lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
-                                                         num_clusters=64, seed=conf.calibration_seed),
-                              lambda cb, p: cb.save(p), VladCodebook.load, timings)
+            codebook, cb_key = vlad_codebook(folder, base_key, imaging, map_base, localization.vlad_clusters,
+                                             conf.calibration_seed, timings)
             image_set = map_image_set(map_base, data.disc.location_index)
             preds = predict_placements(tb, placements, map_base, {MAP_SET: image_set}, codebook, cb_key, lcfg,
                                        imaging, folder, timings)
@@ -188,8 +192,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
 
         model = cached(f"calibration {name}", run_dir / f"success_model_{name}.json", key, fit,
                        lambda m, p: write_json(p, m.to_json()),
-                       lambda p: SuccessModel.from_json(json.loads(Path(p).read_text())),
-                       data.timings)
+                       lambda p: SuccessModel.from_json(json.loads(Path(p).read_text())), data.timings)
         data.calibration[name] = {"model": model, "coverages": covs}
 
 
@@ -214,7 +217,7 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
     for p in placements:
         if p.method == NO_MARKERS or (p.method, p.run, p.k) not in success:
             continue
-        cands = placement_candidates(p.markers, data.disc.candidate_world_from_marker)
+        cands = placement_candidates(p.markers, data.disc.candidate_world_from_marker, plan_config.placement.tag_size)
         if cands is None:
             log.info("calibration: %s k=%d run %d is not made of candidates; left out", p.method, p.k, p.run)
             continue

@@ -26,16 +26,14 @@ import numpy as np
 
 from ..markers import FAMILY, Marker
 from .metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from .placements import NO_MARKERS, PlacementRun
+from .placements import NO_MARKERS, RESERVED_NAMES, PlacementRun
 
 log = logging.getLogger(__name__)
 
 __all__ = ["SINGLE", "CEILING", "single_placements", "oracle_order", "ceiling_placements", "ceiling_markdown"]
 
-SINGLE = "single"
-"""Method name of the one-tag placements (run = candidate index)."""
-CEILING = "ceiling"
-"""Method name of the oracle placements."""
+SINGLE, CEILING = RESERVED_NAMES
+"""Method names of the one-tag placements (run = candidate index) and of the oracle placements."""
 
 
 def single_placements(candidate_world_from_marker: np.ndarray, tag_size: float) -> list[PlacementRun]:

@@ -130,4 +130,6 @@ def validate_evaluate_config(config: EvaluateConfig) -> None:
     diag = config.diagnostics
     if (diag.ceiling or diag.calibration) and NO_MARKERS not in methods:
         raise UserError("--ceiling and --calibration compare with no markers: keep 'none' in --methods")
+    if diag.ceiling and (config.study.tag_scale != 1.0 or config.study.shift != 0.0):
+        raise UserError("--ceiling places tags as planned: leave out --tag-scale and --shift (or --ceiling)")
     check_evaluate_config(config)  # numbers: finite and in range (markerplace.validation)

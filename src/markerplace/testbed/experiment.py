@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,7 @@ from ..io_utils import atomic_path
 from .calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
 from .ceiling import SINGLE, ceiling_markdown, ceiling_placements, single_placements
 from .images import BaseImages, TestbedImaging
+from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from .predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
@@ -53,12 +54,6 @@ class EvaluationResult:
     timings: dict
 
 
-def _localizer_spec(config) -> tuple:
-    """(registered localizer name, its settings) of the run (hashable: part of cache keys)."""
-    loc = config.localization
-    return loc.localizer, (("use_tags", loc.use_tags), ("tag_corners", loc.tag_corners), ("seed", config.seed))
-
-
 def _test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
     from . import poses as tp
 
@@ -77,15 +72,6 @@ def _test_poses(out: Path, config, plan_config, data, base_key: str, timings: di
                                                         tcfg, is_free),
                            lambda t, path: t.save(path), tp.TestPoses.load, timings)
     return poses
-
-
-def _codebook(path: Path, key: str, map_base: BaseImages, config, timings: dict):
-    from ..localization.vlad import VladCodebook
-
-    return cached("vlad_codebook", path, key,
-                  lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
-                                             num_clusters=config.localization.vlad_clusters, seed=config.seed),
-                  lambda cb, p: cb.save(p), VladCodebook.load, timings)
 
 
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
@@ -107,13 +93,12 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             localization SIFT preset, OpenCV defaults).
         progress: progress bars.
         reuse_unchanged: give queries no placement's marker can change the no-marker result
-            instead of localizing them again (exact; see :func:`_predict_all`).
+            instead of localizing them again (exact; see :mod:`markerplace.testbed.predict`).
         work_dir: folder of the planner's artifacts and the caches (default ``out_dir``); runs
             that share it share every stage their inputs have in common (``markerplace study``).
         extra_placements: more marker sets evaluated as methods: name -> markers in the
             internal (scene) frame.
     """
-    from ..imaging.config import SIFT_DEFAULT
     from ..io_utils import write_json
     from ..markers import load_markers
     from ..plan.planner import prepare, validate
@@ -129,17 +114,18 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     work = Path(work_dir) if work_dir is not None else out
     cache_dir = work / "cache"
     timings: dict[str, float] = {}
-    imaging = imaging_config or replace(plan_config.imaging, sift=SIFT_DEFAULT)
-    lcfg = _localizer_spec(config)
+    imaging = testbed_imaging_config(plan_config, imaging_config)
+    lcfg = localizer_spec(config.localization, config.seed)
 
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor)
-        calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress)
+        calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress,
+                       cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0
         scene = scene_spec.load()
         map_poses = np.asarray(data.disc.world_from_cam, float)
-        base_key = cache.hash_of("testbed-v1", cache.scene_hash(scene), map_poses)
+        base_key = map_base_key(scene, map_poses)
 
         t0 = time.perf_counter()
         extra = dict(extra_placements or {})
@@ -160,10 +146,10 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         union = list({marker_key(m): m for p in placements + singles for m in p.markers}.values())
         tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
         t0 = time.perf_counter()
-        map_base = BaseImages(tb, map_poses, cache_dir / "map_base", base_key, True, "map")
+        map_base = map_images(tb, map_poses, cache_dir, base_key)
         timings["map_no_markers"] = time.perf_counter() - t0
-        cb_key = cache.hash_of("vlad-v1", base_key, imaging, config.localization.vlad_clusters, config.seed)
-        codebook = _codebook(cache_dir / "vlad_codebook.npz", cb_key, map_base, config, timings)
+        codebook, cb_key = vlad_codebook(cache_dir, base_key, imaging, map_base, config.localization.vlad_clusters,
+                                         config.seed, timings)
         t0 = time.perf_counter()
         query_base = {ts: BaseImages(tb, test_poses[ts].world_from_cam, cache_dir / f"query_base_{ts}",
                                      cache.hash_of(base_key, test_poses[ts].world_from_cam), False, f"queries {ts}")
@@ -173,14 +159,16 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         sets = {ts: ImageSet(ts, test_poses[ts].world_from_cam, query_base[ts]) for ts in config.test.sets}
         if diag.calibration:
             sets[MAP_SET] = map_image_set(map_base, data.disc.location_index)
-        predictions = predict_placements(tb, placements + singles, map_base, sets, codebook, cb_key, lcfg, imaging,
-                                         cache_dir, timings, reuse_unchanged)
+        predictions = predict_placements(tb, placements, map_base, sets, codebook, cb_key, lcfg, imaging, cache_dir,
+                                         timings, reuse_unchanged)
         estimate = None
-        if diag.ceiling:  # the oracle picks from the single-tag outcomes, then evaluated as placements
+        if diag.ceiling:  # every candidate alone, the oracle's picks from those outcomes, then the picks
+            test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
+            predictions.update(predict_placements(tb, placements[:1] + singles, map_base, test_sets, codebook, cb_key,
+                                                  lcfg, imaging, cache_dir, timings, reuse_unchanged))
             ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
                                                         plan_config.placement.tag_size, predictions, test_poses,
                                                         config.study.ks)
-            test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
             predictions.update(predict_placements(tb, placements[:1] + ceiling_runs, map_base, test_sets, codebook,
                                                   cb_key, lcfg, imaging, cache_dir, timings, reuse_unchanged))
             placements = placements + ceiling_runs

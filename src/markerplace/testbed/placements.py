@@ -18,6 +18,9 @@ from ..plan.methods import PLACEMENT_METHODS
 #: ``--methods`` name of the marker set without markers; every other name is a placement method
 #: of :data:`~markerplace.plan.methods.PLACEMENT_METHODS`.
 NO_MARKERS = "none"
+#: Names of the diagnostics' marker sets (:mod:`markerplace.testbed.ceiling`); a placement file of
+#: that name is renamed like one named after a method.
+RESERVED_NAMES = ("single", "ceiling")
 
 
 def method_names() -> tuple[str, ...]:
@@ -150,11 +153,13 @@ def find_placement_files(folder: str | Path) -> dict[str, Path]:
         raise UserError(f"--placements {folder} is not a directory")
     found: dict[str, Path] = {}
     for path in sorted(folder.rglob("*.json")):
-        # evaluate's own outputs and caches are not placements
-        if path.name.endswith(".meta.json") or path.name in ("config.json", "timings.json") or "cache" in path.relative_to(folder).parts:
+        # plan's and evaluate's own outputs and caches are not placements
+        parts = path.relative_to(folder).parts
+        if (path.name.endswith(".meta.json") or path.name in ("config.json", "timings.json", "check.json")
+                or path.name.startswith("success_model_") or {"cache", "calibration", "tagmaps"} & set(parts)):
             continue
         name = path.parent.name if path.name == "placement.json" else path.stem
-        if name in method_names():
+        if name in method_names() or name in RESERVED_NAMES:
             name = f"{name}-file"
         if name in found:
             raise UserError(f"--placements: two files give the method name {name!r} ({found[name]}, {path}): rename one")

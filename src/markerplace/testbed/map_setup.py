@@ -1,0 +1,59 @@
+"""The marker-free side of the testbed that every evaluation of one plan shares: the map images'
+features and the VLAD codebook trained on them, cached under keys that depend only on the
+scene, the map poses, the imaging settings and the codebook's settings. ``evaluate`` and the
+calibration of ``expected-recall`` (:mod:`markerplace.testbed.calibration`) build them through
+these functions, so when they share a cache folder the map is rendered and the codebook trained
+once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..imaging.config import SIFT_DEFAULT
+from ..runtime import cache
+from ..runtime.stages import cached
+from .images import BaseImages, TestbedImaging
+
+__all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "vlad_codebook"]
+
+
+def testbed_imaging_config(plan_config, imaging_config=None):
+    """The testbed's imaging: ``imaging_config``, else the plan's camera with the localization
+    SIFT preset (OpenCV defaults)."""
+    return imaging_config or replace(plan_config.imaging, sift=SIFT_DEFAULT)
+
+
+def localizer_spec(localization, seed: int) -> tuple:
+    """(registered localizer name, its settings) from a
+    :class:`~markerplace.testbed.config.LocalizationConfig` and the RANSAC seed (hashable: part
+    of cache keys)."""
+    return localization.localizer, (("use_tags", localization.use_tags), ("tag_corners", localization.tag_corners),
+                                    ("seed", int(seed)))
+
+
+def map_base_key(scene, map_poses: np.ndarray) -> str:
+    """Key of the marker-free map of ``scene`` at (N, 4, 4) ``map_poses``."""
+    return cache.hash_of("testbed-v1", cache.scene_hash(scene), np.asarray(map_poses, float))
+
+
+def map_images(tb: TestbedImaging, map_poses: np.ndarray, cache_dir: Path, base_key: str) -> BaseImages:
+    """Marker-free map features (3D points only) and in-view masks, in ``cache_dir/map_base``."""
+    return BaseImages(tb, np.asarray(map_poses, float), Path(cache_dir) / "map_base", base_key, True, "map")
+
+
+def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages, num_clusters: int, seed: int,
+                  timings: dict | None = None) -> tuple:
+    """(codebook, key): the VLAD codebook trained on the marker-free map's descriptors,
+    ``cache_dir/vlad_codebook.npz``; the key fixes the map of every prediction made with it."""
+    from ..localization.vlad import VladCodebook
+
+    key = cache.hash_of("vlad-v1", base_key, imaging, num_clusters, seed)
+    codebook = cached("vlad_codebook", Path(cache_dir) / "vlad_codebook.npz", key,
+                      lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
+                                                 num_clusters=num_clusters, seed=seed),
+                      lambda cb, p: cb.save(p), VladCodebook.load, timings)
+    return codebook, key
