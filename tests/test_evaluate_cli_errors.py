@@ -24,11 +24,11 @@ def test_test_seed_defaults_to_seed_and_overrides_it():
 
     parser = argparse.ArgumentParser()
     add_evaluate_parser(parser.add_subparsers(dest="command"))
-    from markerplace.testbed.experiment import _localizer_spec
+    from markerplace.testbed.map_setup import localizer_spec
 
     base = ["evaluate", "tiny", "--out", "x", "--seed", "7"]
     assert evaluate_config_from_args(parser.parse_args(base)).pose_seed == 7
     config = evaluate_config_from_args(parser.parse_args(base + ["--test-seed", "3"]))
     assert config.pose_seed == 3
     # the localizer (RANSAC) and the VLAD codebook keep --seed
-    assert config.seed == 7 and dict(_localizer_spec(config)[1])["seed"] == 7
+    assert config.seed == 7 and dict(localizer_spec(config.localization, config.seed)[1])["seed"] == 7
