@@ -158,6 +158,14 @@ def test_find_placement_files(tmp_path):
     (tmp_path / "expert" / "config.json").write_text("{}")
     found = placements.find_placement_files(tmp_path)
     assert sorted(found) == ["expert", "human-file", "manual"]
+    # a plan folder's own artifacts are not placements; the diagnostics' names are reserved
+    (tmp_path / "expert" / "success_model_expected-recall.json").write_text("{}")
+    (tmp_path / "expert" / "tagmaps").mkdir()
+    (tmp_path / "expert" / "tagmaps" / "wpilib_field_layout.json").write_text("{}")
+    (tmp_path / "expert" / "calibration").mkdir()
+    (tmp_path / "expert" / "calibration" / "x.json").write_text("{}")
+    (tmp_path / "ceiling.json").write_text("[]")
+    assert sorted(placements.find_placement_files(tmp_path)) == ["ceiling-file", "expert", "human-file", "manual"]
 
 
 # --- end to end --------------------------------------------------------------------------------
