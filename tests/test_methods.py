@@ -22,13 +22,8 @@ from markerplace.plan.methods import (
     get_placement_method,
     method_from_config,
 )
-from markerplace.plan.placement import (
-    MarkerCoverage,
-    apply_coverages,
-    omp_greedy,
-    random_placement,
-    uniform_placement,
-)
+from markerplace.plan.baselines import random_placement, uniform_placement
+from markerplace.plan.placement import MarkerCoverage, apply_coverages, omp_greedy
 from markerplace.testbed import placements
 from markerplace.testbed import config as tbconfig
 

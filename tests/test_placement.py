@@ -15,9 +15,8 @@ from markerplace.plan.placement import (
     omp_greedy,
     percentile_with_zeros,
     q_from_v,
-    random_placement,
-    uniform_placement,
 )
+from markerplace.plan.baselines import random_placement, uniform_placement
 
 
 def random_problem(rng: np.random.Generator, N: int, C: int, max_cov: int, ties: bool = False):

@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .localizability import entropy, information_gain_whitened
+from .localizability import entropy
 from .placement import MarkerCoverage, PlacementResult, _check_k, _Problem
 from .success_model import SuccessModel
 
@@ -66,18 +66,13 @@ class _RecallProblem(_Problem):
         """(len(cands),) expected poses gained ``Delta(m | S)`` and mean information gain over
         all N poses (nats) of candidates ``cands``."""
         cands = np.asarray(cands, dtype=np.int64)
-        sizes = self.sizes[cands]
         dg = np.zeros(len(cands))
         mg = np.zeros(len(cands))
-        nz = sizes > 0
+        nz, pidx, g, seg = self.pose_gains(cands)
         if not np.any(nz):
             return dg, mg
         live = cands[nz]
-        pidx = np.concatenate([self.coverages[m].pose_idx for m in live])
-        info = np.concatenate([self.coverages[m].info for m in live])
-        g = information_gain_whitened(self.linv[pidx], info)
         dp = self.model.probability_increase(self.scores[pidx], g)
-        seg = np.repeat(np.arange(len(live)), sizes[nz])
         dg[nz] = np.bincount(seg, weights=dp, minlength=len(live))
         mg[nz] = np.bincount(seg, weights=g, minlength=len(live)) / self.N
         return dg, mg

@@ -34,7 +34,8 @@ import numpy as np
 
 from ..registry import Registry, configure
 from .human import HumanConfig, human_placement
-from .placement import apply_coverages, omp_greedy, random_placement, uniform_placement
+from .baselines import random_placement, uniform_placement
+from .placement import apply_coverages, omp_greedy
 
 if TYPE_CHECKING:  # pragma: no cover
     from .planner import PlacementConfig, PlanData

@@ -1,5 +1,6 @@
-"""Marker placement: OMP greedy (plain and lazy), random and uniform baselines (the algorithms;
-:mod:`markerplace.plan.methods` makes them placement methods chosen by name).
+"""Marker placement: OMP greedy, plain and lazy (the algorithm; the random and uniform baselines
+are in :mod:`markerplace.plan.baselines`; :mod:`markerplace.plan.methods` makes them placement
+methods chosen by name).
 
 The problem is given as information matrices: ``base_info`` (N, 6, 6), the information of every
 feasible camera pose without markers (see :mod:`markerplace.plan.localizability`), and per candidate
@@ -214,20 +215,35 @@ class _Problem:
         self.lam[cov.pose_idx] += cov.info
         self.linv[cov.pose_idx] = whitening(self.lam[cov.pose_idx])
 
+    def pose_gains(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per-pose information gains (nats) of candidates ``cands``, flattened.
+
+        Returns:
+            nz (len(cands),) bool: the candidate is seen by some pose; pidx (L,) the poses of
+            the seen candidates, one segment each, in order; g (L,) their gains; seg (L,) the
+            segment (index into ``cands[nz]``) of each entry.
+        """
+        cands = np.asarray(cands, dtype=np.int64)
+        sizes = self.sizes[cands]
+        nz = sizes > 0
+        live = cands[nz]
+        if not len(live):
+            return nz, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+        pidx = np.concatenate([self.coverages[m].pose_idx for m in live])
+        info = np.concatenate([self.coverages[m].info for m in live])
+        g = information_gain_whitened(self.linv[pidx], info)
+        return nz, pidx, g, np.repeat(np.arange(len(live)), sizes[nz])
+
     def evaluate(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q-th percentile gains and mean gains (nats) of candidates ``cands``."""
         cands = np.asarray(cands, dtype=np.int64)
         sizes = self.sizes[cands]
         qg = np.zeros(len(cands))
         mg = np.zeros(len(cands))
-        nz = sizes > 0
+        nz, _, g, seg = self.pose_gains(cands)
         if not np.any(nz):
             return qg, mg
         live = cands[nz]
-        pidx = np.concatenate([self.coverages[m].pose_idx for m in live])
-        info = np.concatenate([self.coverages[m].info for m in live])
-        g = information_gain_whitened(self.linv[pidx], info)
-        seg = np.repeat(np.arange(len(live)), sizes[nz])
         mg[nz] = np.bincount(seg, weights=g, minlength=len(live)) / self.N
         # Per-segment k-th smallest: sort by (segment, gain); segments stay in place.
         srt = g[np.lexsort((g, seg))]
@@ -339,59 +355,7 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     return PlacementResult(order, gains, means, elig, q, evaluations, lam)
 
 
-# --------------------------------------------------------------------------------------------
-# Baselines
-# --------------------------------------------------------------------------------------------
-
-
-def random_placement(num_candidates: int, k: int, seed: int) -> list[int]:
-    """k distinct candidate indices drawn uniformly (``numpy.random.default_rng(seed)``)."""
-    k = _check_k(k, num_candidates)
-    rng = np.random.default_rng(seed)
-    return [int(i) for i in rng.choice(num_candidates, size=k, replace=False)]
-
-
-def uniform_placement(arclength: np.ndarray, perimeter_length: float, k: int,
-                      seed: int) -> list[int]:
-    """k candidates spread evenly along the free-space perimeter (the paper's 'uniform').
-
-    As in Meyer-Delius et al. (2011), markers are distributed roughly uniformly along the
-    perimeter: targets at arc positions ``o + i L / k`` (i = 0..k-1) with a random offset
-    ``o ~ U[0, L/k)`` drawn from ``numpy.random.default_rng(seed)``; each target in turn takes
-    the nearest unused candidate (distance measured around the closed perimeter, ties to the
-    smallest index).
-
-    Args:
-        arclength: (C,) position of each candidate along the perimeter, metres in [0, L]
-            (several perimeter loops may be concatenated into one parameterization).
-        perimeter_length: total perimeter length L, metres.
-        k: number of markers, 1 <= k <= C.
-        seed: random seed of the offset.
-
-    Returns:
-        k distinct candidate indices, in the order of the targets.
-    """
-    s = np.asarray(arclength, dtype=float).reshape(-1)
-    C = s.shape[0]
-    k = _check_k(k, C)
-    L = float(perimeter_length)
-    if not L > 0:
-        raise UserError("perimeter length must be positive")
-    rng = np.random.default_rng(seed)
-    step = L / k
-    targets = rng.uniform(0.0, step) + step * np.arange(k)
-    used = np.zeros(C, dtype=bool)
-    out: list[int] = []
-    for t in targets:
-        d = np.abs(np.mod(s - t + L / 2.0, L) - L / 2.0)
-        d[used] = np.inf
-        i = int(np.argmin(d))
-        used[i] = True
-        out.append(i)
-    return out
-
-
 __all__ = [
     "MarkerCoverage", "PlacementResult", "apply_coverages", "coverage_percentages", "inverted_cdf_rank",
-    "omp_greedy", "percentile_with_zeros", "q_from_v", "random_placement", "uniform_placement",
+    "omp_greedy", "percentile_with_zeros", "q_from_v",
 ]
