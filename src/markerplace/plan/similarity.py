@@ -12,20 +12,22 @@ L2-normalised (float32), so the cosine is an inner product; both methods range-s
 the threshold lowered by ``_BAND`` and then decide every candidate pair exactly:
 
     * the 3D condition ``||p_i - p_j|| > min_distance`` in float64, on every candidate;
-    * the cosine: both indexes store the normalised vectors uncompressed (``IndexFlatIP``,
-      ``IndexIVFFlat``), so the inner product FAISS returns is the float32 cosine of the
-      original descriptors, within about 1e-5 of the float64 value (normalising and a 128-term
-      float32 dot product each err by at most ~D * 2^-24 relative). A pair more than
-      ``_BAND = 1e-4`` above the threshold is therefore a look-alike, one more than ``_BAND``
-      below is not, and the pairs in between are recomputed in float64 from the original
-      descriptors. The decision is the float64 brute-force decision for every pair found.
+    * the cosine: ``exact``'s ``IndexFlatIP`` returns the float32 cosine of the normalised
+      descriptors; ``ivf`` searches PCA-reduced vectors (an orthonormal projection, so a
+      reduced distance never exceeds the full one and no look-alike falls outside the radius)
+      and its candidates' float32 cosines are computed from the full normalised descriptors.
+      Either is within about 1e-5 of the float64 value (normalising and a 128-term float32 dot
+      product each err by at most ~D * 2^-24 relative). A pair more than ``_BAND = 1e-4`` above
+      the threshold is therefore a look-alike, one more than ``_BAND`` below is not, and the
+      pairs in between are recomputed in float64 from the original descriptors. The decision is
+      the float64 brute-force decision for every pair found.
 
 Methods:
     * ``exact``: ``IndexFlatIP`` range search (BLAS, O(P^2 D)); finds every pair, so its counts
       equal float64 brute force. Used up to ``exact_max_points`` points (the measured crossover
       with ``ivf``, see ``benchmarks/similarity.py``).
-    * ``ivf``: ``IndexIVFFlat`` (inner product) with ``nlist`` cells from FAISS's spherical
-      k-means, trained on a seeded sample; each point is assigned once and searches its
+    * ``ivf``: ``IndexIVFFlat`` (L2, on the ``pca_dims``-D projection) with ``nlist`` cells from
+      FAISS's k-means, trained on a seeded sample; each point is assigned once and searches its
       ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search). The only
       approximation is the probe limit: a look-alike in a cell that was not searched is missed,
       so counts can only be too low, never too high. :func:`~markerplace.plan.similarity_quality.measure_error` reports how much.
@@ -79,6 +81,9 @@ class SimilarityConfig:
             (default 128; ``nprobe_max <= nprobe`` turns this off). Dense groups of look-alikes
             (repeated texture) span many k-means cells; this finds them without raising
             ``nprobe`` for every point.
+        pca_dims: dimensions of the orthonormal PCA projection the ``ivf`` index searches
+            (default 64; 0 or >= D: the full descriptors). Shorter vectors scan faster; the
+            projection can only add candidates, which are then decided on the full descriptors.
         train_points_per_cell: k-means training sample size per cell (default 40, FAISS's
             recommended minimum is 39).
         train_iters: k-means iterations (default 10).
