@@ -173,7 +173,7 @@ def test_find_placement_files(tmp_path):
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
 
 
-def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
+def test_evaluate_tiny_end_to_end_and_resume(tmp_path, capsys):
     import csv
 
     from markerplace.cli.main import main
@@ -181,6 +181,8 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path):
     out = tmp_path / "eval"
     args = ["evaluate", "tiny", "--out", str(out), "--tests", "20", "--k", "2", "--runs", "1", *FAST]
     assert main(args) == 0
+    printed = capsys.readouterr().out  # the printed summary carries the paired intervals
+    assert "Paired differences, `weighted` test set, 5cm/5deg" in printed and "| Ours | Rand. (1 run) |" in printed
     for name in ("recall.csv", "tables.md", "recall_vs_k.png", "query_errors.npz", "timings.json", "config.json",
                  "test_poses_weighted.npz", "test_poses_uniform.npz"):
         assert (out / name).stat().st_size > 0, name

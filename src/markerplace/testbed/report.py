@@ -38,7 +38,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     """
     from ..io_utils import write_json, write_npz
     from ..report.figures import recall_vs_k
-    from ..report.paired import paired_markdown
+    from ..report.paired import paired_differences, paired_markdown, paired_table
     from ..report.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
     from ..runtime.cache import config_dict
     from . import metrics
@@ -71,9 +71,14 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     hits = {ts: {(m, run, k): metrics.hit_mask(*res, t_main, r_main)
                  for (m, run, k, t), res in results.items() if t == ts} for ts in config.test.sets}
     md += paired_markdown(hits, ks, main, seed=config.seed)
+    ts0 = config.test.sets[0]
+    diffs = paired_differences(hits[ts0], ks, seed=config.seed)
+    if diffs:  # the printed summary carries the intervals too: a recall table alone can be noise
+        summary += (f"\n\nPaired differences, `{ts0}` test set, {main} (method minus the baseline's run mean, "
+                    f"recall points, 95 % bootstrap interval; bold: above zero, italic: below):\n\n"
+                    + paired_table(diffs, ks))
     with atomic_path(out / "tables.md") as tmp:
         tmp.write_text(md)
-    ts0 = config.test.sets[0]
     curves = recall_curves(rows, scene_name, ts0, main, ks)
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
