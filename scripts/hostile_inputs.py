@@ -54,7 +54,10 @@ def cli(args: list[str], cwd: Path, timeout: float = 600, interrupt_after: float
     if interrupt_after is None:
         res = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=timeout)
         return res.returncode, res.stdout, res.stderr, time.perf_counter() - t0
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
+    # a shell's background job inherits SIGINT ignored (and Python then keeps it ignored): give
+    # the child the default disposition, as a terminal user's Ctrl-C has
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(interrupt_after)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=timeout)
