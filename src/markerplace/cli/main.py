@@ -82,7 +82,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..markers import check_markers_on_walls, load_markers
     from ..scene.spec import SceneSpec
-    from ..plan.planner import check_k, first_pick_gain, place, prepare, validate
+    from ..plan.placement import check_k
+    from ..plan.planner import first_pick_gain, place, prepare, validate
     from ..report.plan_outputs import write_plan_outputs
     from ..output_checks import check_output_dir
     from ..scene.worldframe import markers_to_internal, world_offset

@@ -7,14 +7,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UserError
-from .placement import _check_k
+from .placement import check_k
 
 __all__ = ["random_placement", "uniform_placement"]
 
 
 def random_placement(num_candidates: int, k: int, seed: int) -> list[int]:
     """k distinct candidate indices drawn uniformly (``numpy.random.default_rng(seed)``)."""
-    k = _check_k(k, num_candidates)
+    k = check_k(k, num_candidates)
     rng = np.random.default_rng(seed)
     return [int(i) for i in rng.choice(num_candidates, size=k, replace=False)]
 
@@ -41,7 +41,7 @@ def uniform_placement(arclength: np.ndarray, perimeter_length: float, k: int,
     """
     s = np.asarray(arclength, dtype=float).reshape(-1)
     C = s.shape[0]
-    k = _check_k(k, C)
+    k = check_k(k, C)
     L = float(perimeter_length)
     if not L > 0:
         raise UserError("perimeter length must be positive")

@@ -29,7 +29,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from .localizability import entropy
-from .placement import MarkerCoverage, PlacementResult, _check_k, _Problem
+from .placement import MarkerCoverage, PlacementResult, check_k, _Problem
 from .success_model import SuccessModel
 
 log = logging.getLogger(__name__)
@@ -112,7 +112,7 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
         UserError: k < 1 or k > C.
     """
     C = len(coverages)
-    k = _check_k(k, C)
+    k = check_k(k, C)
     lam = np.array(base_info, dtype=float, copy=True)
     N = lam.shape[0]
     for ex in existing or ():

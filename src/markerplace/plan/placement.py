@@ -257,11 +257,13 @@ class _Problem:
         return qg, mg
 
 
-def _check_k(k: int, num_candidates: int) -> int:
+def check_k(k: int, num_candidates: int) -> int:
+    """``k`` as an int; :class:`UserError` unless 1 <= k <= ``num_candidates`` (integer)."""
     if int(k) != k or k < 1:
         raise UserError(f"k = {k}: the number of markers must be a positive integer")
     if k > num_candidates:
-        raise UserError(f"k = {k} exceeds the {num_candidates} candidate marker poses: lower k")
+        raise UserError(f"{k} markers requested but only {num_candidates} candidate marker poses were found: ask for "
+                        "fewer markers or reduce --marker-spacing")
     return int(k)
 
 
@@ -288,7 +290,7 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
         UserError: k < 1, k > C, or v outside [0, 100].
     """
     C = len(coverages)
-    k = _check_k(k, C)
+    k = check_k(k, C)
     lam = np.array(base_info, dtype=float, copy=True)
     N = lam.shape[0]
     for ex in existing or ():
@@ -356,6 +358,6 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
 
 
 __all__ = [
-    "MarkerCoverage", "PlacementResult", "apply_coverages", "coverage_percentages", "inverted_cdf_rank",
+    "MarkerCoverage", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
     "omp_greedy", "percentile_with_zeros", "q_from_v",
 ]

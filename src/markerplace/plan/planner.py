@@ -38,7 +38,7 @@ from .localizability import (
 from .observe import observe
 from .marker_models import MARKER_MODELS, get_marker_model
 from .methods import PLACEMENT_METHODS, method_from_config
-from .placement import MarkerCoverage, apply_coverages
+from .placement import MarkerCoverage, apply_coverages, check_k
 from .similarity import SimilarityConfig, count_similar
 
 log = logging.getLogger(__name__)
@@ -279,13 +279,6 @@ class Placement:
     markers: list
     info_after: np.ndarray
     q: float
-
-
-def check_k(k: int, num_candidates: int) -> None:
-    """Raise :class:`UserError` when ``k`` markers cannot be placed on ``num_candidates`` spots."""
-    if k > num_candidates:
-        raise UserError(f"{k} markers requested but only {num_candidates} candidate marker poses were found: ask for "
-                        "fewer markers or reduce --marker-spacing")
 
 
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
