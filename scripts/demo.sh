@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's demo (run by `make demo` after set-up): look at a built-in scene, plan markers
 # with OMP, plan on a scan-like mesh, and prove on a short simulation that the markers help.
-# About 10 minutes on 2 cores. Ends by printing the path of the plan's report.html.
+# About 12 minutes on 2 cores (18 min measured with other jobs on the cores). Ends by printing the path of the plan's report.html.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MP=.venv/bin/markerplace
