@@ -39,12 +39,12 @@ TRUE_BGR, PLAN_BGR, NONE_BGR = (40, 160, 40), (200, 0, 200), (200, 120, 0)
 
 
 def _plan_method(placements) -> str | None:
-    from ..testbed.placements import NO_MARKERS, baseline_methods
+    from ..testbed.placements import NO_MARKERS, RESERVED_NAMES, baseline_methods
 
     methods = [p.method for p in placements if p.k > 0]
     if "omp" in methods:
         return "omp"
-    others = [m for m in methods if m not in (NO_MARKERS, "ceiling") and m not in baseline_methods()]
+    others = [m for m in methods if m not in (NO_MARKERS, *RESERVED_NAMES) and m not in baseline_methods()]
     return others[0] if others else None
 
 
