@@ -111,6 +111,17 @@ def test_ivf_on_a_dense_blob():
     assert m["recall"] >= 0.99
 
 
+def test_ivf_probing_every_cell_is_exact():
+    """nprobe = nlist: the cell-by-cell join sees every pair once, so the counts are exact
+    (a pair lost or counted twice between cells, or a thread's counts dropped, would show)."""
+    D, P = synthetic_descriptors(5000, seed=9, dup_fraction=0.4, extent=8.0)
+    exact = count_similar_exact(D, P)
+    assert exact.sum() > 1000
+    for threads in (1, 2, 3):
+        got = count_similar_ivf(D, P, SimilarityConfig(nlist=12, nprobe=12, nprobe_max=12, threads=threads))
+        assert np.array_equal(got, exact)
+
+
 def test_deterministic_and_thread_count_independent():
     D, P = synthetic_descriptors(8000, seed=2)
     exact = count_similar_exact(D, P)

@@ -9,7 +9,7 @@ Why FAISS: the search is a self-join of up to millions of 128-D descriptors, and
 (``faiss-cpu``) gives a tuned, multi-threaded exact index and inverted-file index with range
 search, so the project keeps no hand-written nearest-neighbour code. Descriptors are
 L2-normalised (float32), so the cosine is an inner product; both methods range-search with
-the threshold lowered by ``_BAND`` and then decide every candidate pair exactly:
+the threshold lowered by ``BAND`` and then decide every candidate pair exactly:
 
     * the 3D condition ``||p_i - p_j|| > min_distance`` in float64, on every candidate;
     * the cosine: ``exact``'s ``IndexFlatIP`` returns the float32 cosine of the normalised
@@ -17,8 +17,8 @@ the threshold lowered by ``_BAND`` and then decide every candidate pair exactly:
       reduced distance never exceeds the full one and no look-alike falls outside the radius)
       and its candidates' float32 cosines are computed from the full normalised descriptors.
       Either is within about 1e-5 of the float64 value (normalising and a 128-term float32 dot
-      product each err by at most ~D * 2^-24 relative). A pair more than ``_BAND = 1e-4`` above
-      the threshold is therefore a look-alike, one more than ``_BAND`` below is not, and the
+      product each err by at most ~D * 2^-24 relative). A pair more than ``BAND = 1e-4`` above
+      the threshold is therefore a look-alike, one more than ``BAND`` below is not, and the
       pairs in between are recomputed in float64 from the original descriptors. The decision is
       the float64 brute-force decision for every pair found.
 
@@ -28,7 +28,10 @@ Methods:
       with ``ivf``, see ``benchmarks/similarity.py``).
     * ``ivf``: ``IndexIVFFlat`` (L2, on the ``pca_dims``-D projection) with ``nlist`` cells from
       FAISS's k-means, trained on a seeded sample; each point is assigned once and searches its
-      ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search). The only
+      ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search); the
+      search runs cell by cell, all queries probing a cell against its members at once (a
+      matrix product, see ``join_cells``), then FAISS's own preassigned range search for the
+      few points that search further. The only
       approximation is the probe limit: a look-alike in a cell that was not searched is missed,
       so counts can only be too low, never too high. :func:`~markerplace.plan.similarity_quality.measure_error` reports how much.
     * ``auto``: ``exact`` up to ``exact_max_points`` points, else ``ivf``.
@@ -42,24 +45,17 @@ lists are filled in point order, each query's search is independent), which the 
 from __future__ import annotations
 
 import logging
-import os
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import faiss
 import numpy as np
 
-from .similarity_kernel import count_candidates
+from .similarity_search import BAND, Pairs, Searcher, expand_search, faiss_threads, join_cells
 
 log = logging.getLogger(__name__)
 
 __all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_ivf"]
-
-# half-width of the band around the cosine threshold in which a pair's float32 cosine (from
-# FAISS) is not trusted and the cosine is recomputed in float64 (10x the float32 error bound)
-_BAND = 1e-4
-
 
 @dataclass(frozen=True)
 class SimilarityConfig:
@@ -115,73 +111,12 @@ def _check(descriptors: np.ndarray, points_world: np.ndarray, config: Similarity
         raise ValueError(f"descriptors (P, D) and points (P, 3) expected, got {descriptors.shape} and {points_world.shape}")
     if config.method not in ("auto", "exact", "ivf"):
         raise ValueError(f"unknown similarity method {config.method!r}: use auto, exact or ivf")
-    if not (-1.0 + _BAND < config.cos_threshold < 1.0 - _BAND):
+    if not (-1.0 + BAND < config.cos_threshold < 1.0 - BAND):
         raise ValueError(f"cos_threshold must lie in (-1, 1), got {config.cos_threshold}")
     if config.min_distance < 0:
         raise ValueError(f"min_distance must be >= 0, got {config.min_distance}")
     if config.nprobe < 1 or config.batch < 1 or config.nlist < 0:
         raise ValueError("nprobe and batch must be >= 1, nlist >= 0")
-
-
-@contextmanager
-def _faiss_threads(n: int):
-    """Run FAISS (and its OpenBLAS) on ``n`` OpenMP threads (0: the CPUs we may use)."""
-    if n <= 0:
-        n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    old = faiss.omp_get_max_threads()
-    faiss.omp_set_num_threads(int(n))
-    try:
-        yield
-    finally:
-        faiss.omp_set_num_threads(old)
-
-
-class _Pairs:
-    """The data every candidate pair is decided on.
-
-    Attributes:
-        X: (P, D) float32 unit descriptors (normalised in float64, zero rows stay zero).
-        raw: (P, D) the original descriptors (any numeric dtype), for float64 recomputation.
-        norm: (P,) float64 norms of ``raw``.
-        points: (P, 3) float64 world points, metres.
-    """
-
-    def __init__(self, descriptors: np.ndarray, points_world: np.ndarray, chunk: int = 65536):
-        self.raw = descriptors
-        self.points = np.asarray(points_world, dtype=np.float64)
-        P, D = descriptors.shape
-        self.X = np.empty((P, D), dtype=np.float32)
-        self.norm = np.empty(P, dtype=np.float64)
-        for s in range(0, P, chunk):
-            d = descriptors[s:s + chunk].astype(np.float64)
-            n = np.sqrt(np.einsum("ij,ij->i", d, d))
-            self.norm[s:s + chunk] = n
-            self.X[s:s + chunk] = d / np.maximum(n, 1e-300)[:, None]
-
-    def count(self, queries: np.ndarray, lims: np.ndarray, sims: np.ndarray | None, labels: np.ndarray,
-              cos_t: float, min_d2: float) -> tuple[np.ndarray, np.ndarray]:
-        """Exact look-alike counts of ``queries`` from their range-search candidates.
-
-        Args:
-            queries: (nq,) global row indices of the queries.
-            lims, sims, labels: a FAISS range-search result (candidates of query k are
-                ``labels[lims[k]:lims[k+1]]``); ``sims``: their float32 cosines, or None to
-                compute them from ``X`` (when the search measured something else).
-            cos_t: cosine threshold (strict); min_d2: squared minimum distance (strict).
-
-        Returns:
-            (nq,) int64 counts, and (nq,) bool: the query has a look-alike among the candidates
-            (cosine > ``cos_t``, at any 3D distance, itself excluded).
-        """
-        nq = len(queries)
-        counts = np.zeros(nq, dtype=np.int64)
-        found = np.zeros(nq, dtype=np.bool_)
-        has_sims = sims is not None
-        count_candidates(np.asarray(queries, dtype=np.int64), lims.astype(np.int64, copy=False),
-                         labels.astype(np.int64, copy=False), sims if has_sims else np.zeros(0, np.float32),
-                         has_sims, self.points, self.X, self.raw, self.norm, float(cos_t), _BAND, float(min_d2),
-                         counts, found)
-        return counts, found
 
 
 def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
@@ -209,57 +144,6 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     return out
 
 
-class _Searcher:
-    """A FAISS index over ``vectors`` and how to turn its range-search results into counts.
-
-    Attributes:
-        index: the FAISS index (``IndexFlatIP`` over ``pairs.X``, or ``IndexIVFFlat``, L2, over
-            the reduced vectors).
-        vectors: (P, d) float32 vectors the index holds and the queries are taken from.
-        radius: the range-search radius (an inner product for IP, a squared distance for L2).
-        cosines: whether the index returns the float32 cosines (else they are computed from
-            ``pairs.X`` for the candidates).
-    """
-
-    def __init__(self, index, pairs: _Pairs, vectors: np.ndarray, radius: float, cosines: bool,
-                 config: SimilarityConfig):
-        self.index, self.pairs, self.vectors = index, pairs, vectors
-        self.radius, self.cosines, self.config = radius, cosines, config
-
-    def search(self, queries: np.ndarray, probes: tuple[np.ndarray, np.ndarray] | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """Range-search ``queries`` (global row indices) in batches; count look-alikes exactly.
-
-        Args:
-            queries: (Q,) row indices.
-            probes: for the IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid distances):
-                the cells each query searches, -1 = none (``range_search_preassigned``).
-
-        Returns:
-            (Q,) int64 counts and (Q,) bool: whether the query had any candidate other than
-            itself (at any 3D distance).
-        """
-        cfg = self.config
-        cos_t, min_d2 = float(cfg.cos_threshold), float(cfg.min_distance) ** 2
-        out = np.zeros(len(queries), dtype=np.int64)
-        found = np.zeros(len(queries), dtype=bool)
-        if probes is not None:
-            self.index.nprobe = probes[0].shape[1]
-        for s in range(0, len(queries), cfg.batch):
-            q = queries[s:s + cfg.batch]
-            contiguous = q[-1] - q[0] + 1 == len(q)
-            xq = self.vectors[q[0]:q[-1] + 1] if contiguous else self.vectors[q]
-            if probes is None:
-                lims, sims, labels = self.index.range_search(xq, self.radius)
-            else:
-                lims, sims, labels = self.index.range_search_preassigned(
-                    xq, self.radius, np.ascontiguousarray(probes[0][s:s + len(q)]),
-                    np.ascontiguousarray(probes[1][s:s + len(q)]))
-            out[s:s + len(q)], found[s:s + len(q)] = self.pairs.count(
-                q, lims, sims if self.cosines else None, labels, cos_t, min_d2)
-        return out, found
-
-
 def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
                         config: SimilarityConfig = SimilarityConfig(),
                         queries: np.ndarray | None = None) -> np.ndarray:
@@ -275,47 +159,18 @@ def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
     """
     descriptors = np.asarray(descriptors)
     _check(descriptors, np.asarray(points_world), config)
-    pairs = _Pairs(descriptors, points_world)
+    pairs = Pairs(descriptors, points_world)
     q = np.arange(len(descriptors)) if queries is None else np.asarray(queries, dtype=np.int64)
-    with _faiss_threads(config.threads):
+    with faiss_threads(config.threads):
         index = faiss.IndexFlatIP(descriptors.shape[1])
         index.add(pairs.X)
-        out, _ = _Searcher(index, pairs, pairs.X, config.cos_threshold - _BAND, True, config).search(q)
+        out, _ = Searcher(index, pairs, pairs.X, config.cos_threshold - BAND, True, config).search(q)
     return out.astype(np.int32)
 
 
 def _nlist(P: int, config: SimilarityConfig) -> int:
     n = config.nlist or int(np.clip(round(config.nlist_factor * np.sqrt(P)), 16, 65536))
     return max(1, min(n, P))
-
-
-def _expand(searcher: _Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
-            counts: np.ndarray) -> None:
-    """Search ``queries`` in further cells, by doubling rings: the nearest 2 n cells, then 4 n, ...
-    (n = ``searched.shape[1]``) up to ``nprobe_max``, while the last ring held a look-alike.
-
-    ``searched``: (Q, n) cells already searched. A cell is searched at most once per query (a
-    bitmap of visited cells, even if the quantizer ranks ties differently between calls), so no
-    pair is counted twice. Adds to ``counts``.
-    """
-    nlist = searcher.index.nlist
-    chunk = max(1, (1 << 26) // nlist)  # visited bitmaps of at most 64 MB
-    for s in range(0, len(queries), chunk):
-        q = queries[s:s + chunk]
-        visited = np.zeros((len(q), nlist), dtype=bool)
-        visited[np.arange(len(q))[:, None], np.maximum(searched[s:s + chunk], 0)] = True
-        active = np.arange(len(q))
-        lo = searched.shape[1]
-        while lo < nprobe_max and len(active):
-            hi = min(2 * lo, nprobe_max)
-            dist, cells = quantizer.search(searcher.vectors[q[active]], hi)
-            rows, ok = active[:, None], cells >= 0
-            cells[~ok | visited[rows, np.maximum(cells, 0)]] = -1  # FAISS skips cells numbered -1
-            visited[rows, np.maximum(cells, 0)] |= cells >= 0
-            c, found = searcher.search(q[active], (cells, dist))
-            counts[q[active]] += c
-            active = active[found]
-            lo = hi
 
 
 def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
@@ -330,7 +185,7 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
     P, D = descriptors.shape
     if P < 2:
         return np.zeros(P, dtype=np.int32)
-    pairs = _Pairs(descriptors, points_world)
+    pairs = Pairs(descriptors, points_world)
     nlist = _nlist(P, config)
     nprobe = min(config.nprobe, nlist)
     nprobe_max = max(nprobe, min(config.nprobe_max, nlist))
@@ -339,7 +194,7 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
     d = config.pca_dims if 0 < config.pca_dims < D and n_train >= 4 * D else D  # PCA needs a sample
     train = pairs.X if n_train == P else pairs.X[np.sort(rng.choice(P, n_train, replace=False))]
     t0, c0 = time.perf_counter(), time.process_time()
-    with _faiss_threads(config.threads):
+    with faiss_threads(config.threads):
         if d < D:
             # orthonormal projection (no whitening): reduced distances never exceed full ones
             pca = faiss.PCAMatrix(D, d)
@@ -363,30 +218,18 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
         t2, c2 = time.perf_counter(), time.process_time()
         # unit vectors: cos > t - band <=> |x - y|^2 < 2 - 2 (t - band); the projection keeps
         # every such pair inside the radius (the band also covers float32 rounding)
-        searcher = _Searcher(index, pairs, Y, 2.0 - 2.0 * (config.cos_threshold - _BAND), False, config)
+        searcher = Searcher(index, pairs, Y, 2.0 - 2.0 * (config.cos_threshold - BAND), False, config)
         counts = np.zeros(P, dtype=np.int64)
-        # every point searches its nprobe nearest cells, in two halves; a point whose farther
-        # half still held a candidate searches on (a dense group of look-alikes that k-means
-        # split over more than nprobe cells). Queries go in the order of their cells, so
-        # neighbouring queries scan the same inverted lists while they are in cache.
-        h = (nprobe + 1) // 2
-        everyone = np.argsort(first, kind="stable")
-        c, _ = searcher.search(everyone, (cells[everyone, :h], dist[everyone, :h]))
-        counts[everyone] += c
-        go_on = everyone[:0]
-        if nprobe > h:
-            c, found = searcher.search(everyone, (cells[everyone, h:], dist[everyone, h:]))
-            counts[everyone] += c
-            if nprobe_max > nprobe:
-                go_on = everyone[found]
+        # every point searches its nprobe nearest cells; a point whose farther half of them
+        # still held a candidate searches on (a dense group of look-alikes that k-means split
+        # over more than nprobe cells)
+        found_far = join_cells(searcher, cells, first, (nprobe + 1) // 2, counts)
+        go_on = np.flatnonzero(found_far) if nprobe_max > nprobe else first[:0]
         if len(go_on):
-            _expand(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts)
+            expand_search(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts)
     log.debug("similarity ivf: %d points, PCA %d, %d cells, nprobe %d, %d points searched further (max %d); "
               "wall (CPU) seconds: train %.1f (%.1f), assign + add %.1f (%.1f), search %.1f (%.1f)",
               P, d, nlist, nprobe, len(go_on), nprobe_max, t1 - t0, c1 - c0, t2 - t1, c2 - c1,
               time.perf_counter() - t2, time.process_time() - c2)
     return counts.astype(np.int32)
 
-
-# ----------------------------------------------------------------------------------------------
-# measurement

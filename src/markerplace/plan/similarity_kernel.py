@@ -6,7 +6,8 @@ the cosine in float32 outside a band around the threshold and in float64 from th
 descriptors inside it. Hand-written because no library fuses this per-pair filter with the
 search result: in numpy it needs several arrays as long as the candidate list (hundreds of
 millions of pairs at a few million points), which dominated the time and the memory of the
-stage. The sum order is fixed per pair, so the counts do not depend on the thread count.
+stage. The sum order is fixed per pair, so the counts do not depend on the thread count; it
+releases the GIL, so threads can decide different queries at once.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 __all__ = ["count_candidates"]
 
 
-@numba.njit(cache=True, boundscheck=False, fastmath={"reassoc", "nsz"})
+@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"})
 def count_candidates(queries, lims, labels, sims, has_sims, points, X, raw, norm, cos_t, band, min_d2,
                      counts, found):  # pragma: no cover - compiled
     """Decide every candidate pair exactly (see the module docstring); fill counts and found.
@@ -55,7 +56,7 @@ def count_candidates(queries, lims, labels, sims, has_sims, points, X, raw, norm
         found[k] = f
 
 
-@numba.njit(cache=True, boundscheck=False, fastmath={"reassoc", "nsz"}, inline="always")
+@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"}, inline="always")
 def _similar(q, j, e, sims, has_sims, X, raw, norm, cos_t, band, D):  # pragma: no cover - compiled
     """Cosine of rows q and j > cos_t, decided exactly (float32 outside the band, else float64)."""
     if has_sims:
