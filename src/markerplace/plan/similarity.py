@@ -30,14 +30,15 @@ Methods:
       FAISS's k-means, trained on a seeded sample; each point is assigned once and searches its
       ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search); the
       search runs cell by cell, all queries probing a cell against its members at once (a
-      matrix product, see ``join_cells``), then FAISS's own preassigned range search for the
+      matrix product, see :func:`.similarity_search.join_cells`), then FAISS's own preassigned range search for the
       few points that search further. The only
       approximation is the probe limit: a look-alike in a cell that was not searched is missed,
       so counts can only be too low, never too high. :func:`~markerplace.plan.similarity_quality.measure_error` reports how much.
     * ``auto``: ``exact`` up to ``exact_max_points`` points, else ``ivf``.
 
 Determinism: the training sample and FAISS's k-means are seeded from ``seed``; FAISS runs on
-``threads`` OpenMP threads (restored afterwards). Every stage the result depends on is
+``threads`` OpenMP threads (restored afterwards; the cell join on as many Python threads of one
+OpenMP thread each). Every stage the result depends on is
 thread-count independent (k-means centroids are summed per centroid in point order, inverted
 lists are filled in point order, each query's search is independent), which the tests check.
 """
