@@ -213,7 +213,7 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
         index.train(train)
         t1, c1 = time.perf_counter(), time.process_time()
         # one quantizer pass: the nearest cell files the point, the nprobe nearest are searched
-        dist, cells = quantizer.search(Y, nprobe)
+        _, cells = quantizer.search(Y, nprobe)
         first = np.ascontiguousarray(cells[:, 0])  # named: swig_ptr does not keep the array alive
         index.add_core(P, faiss.swig_ptr(Y), None, faiss.swig_ptr(first))
         t2, c2 = time.perf_counter(), time.process_time()

@@ -124,8 +124,8 @@ class Searcher:
                 the cells each query searches, -1 = none (``range_search_preassigned``).
 
         Returns:
-            (Q,) int64 counts and (Q,) bool: whether the query had any candidate other than
-            itself (at any 3D distance).
+            (Q,) int64 counts and (Q,) bool: whether the query had a look-alike among its
+            candidates (at any 3D distance, itself excluded).
         """
         cfg = self.config
         cos_t, min_d2 = float(cfg.cos_threshold), float(cfg.min_distance) ** 2
@@ -149,7 +149,7 @@ class Searcher:
 
 
 def expand_search(searcher: Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
-            counts: np.ndarray) -> None:
+                  counts: np.ndarray) -> None:
     """Search ``queries`` in further cells, by doubling rings: the nearest 2 n cells, then 4 n, ...
     (n = ``searched.shape[1]``) up to ``nprobe_max``, while the last ring held a look-alike.
 
@@ -178,7 +178,7 @@ def expand_search(searcher: Searcher, quantizer, queries: np.ndarray, searched: 
 
 
 def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
-                counts: np.ndarray) -> np.ndarray:
+               counts: np.ndarray) -> np.ndarray:
     """Range-search every point in its probed cells, one cell at a time; add to ``counts``.
 
     The same pairs as ``range_search_preassigned`` with each point's ``cells``, but grouped by
