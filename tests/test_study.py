@@ -30,3 +30,28 @@ def test_study_tiny_writes_every_group_with_paired_differences(tmp_path, capsys)
     assert (out / "work" / "plan" / "observations").is_dir() and not (out / "runs" / "default" / "plan").exists()
     assert sorted(p.name for p in (out / "runs").iterdir()) == ["default", "no-detection", "shift-0.25", "size-0.5"]
     assert "# Parameter and sensitivity study" in capsys.readouterr().out
+
+
+def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_path):
+    """`--k` of study/evaluate is a list that shares plan's `k`: the default list must plan
+    max(ks) markers (the README's `markerplace study office --out out/study` once failed here)."""
+    from markerplace.cli.main import build_parser
+    from markerplace.cli.options import plan_config_for_budgets
+    from markerplace.plan.planner import validate
+    from markerplace.validation import EVAL_K, parse_int_list
+
+    for command in ("study", "evaluate"):
+        args = build_parser().parse_args([command, "tiny", "--out", str(tmp_path / command)])
+        ks = parse_int_list(args.k, "--k", EVAL_K)
+        assert ks == (5, 10, 15, 20)
+        config = plan_config_for_budgets(args, ks)
+        validate(config)
+        assert config.placement.k == 20 and args.k == "5,10,15,20"  # the caller's args are left alone
+
+
+def test_study_with_default_budgets_gets_past_its_settings(capsys):
+    """The default `--k` list passes the settings checks: the run stops only at the unwritable
+    `--out`, the next check (not at `-k '5,10,15,20' is not a number`)."""
+    assert main(["study", "tiny", "--out", "/proc/markerplace-study"]) == 2
+    err = capsys.readouterr().err
+    assert "--out /proc/markerplace-study" in err and "-k" not in err

@@ -41,9 +41,7 @@ def evaluate_config_from_args(args: argparse.Namespace):
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
-    from dataclasses import replace
-
-    from .options import plan_config_from_args, plan_inputs_in_scene_frame
+    from .options import plan_config_for_budgets, plan_inputs_in_scene_frame
     from ..testbed.config import validate_evaluate_config
     from ..testbed.placements import find_placement_files, method_names
     from ..markers import load_markers
@@ -56,8 +54,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     validate_evaluate_config(config)
     if not config.study.methods and not args.placements:
         raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
-    plan_config = plan_config_from_args(args)
-    plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(config.study.ks)))
+    plan_config = plan_config_for_budgets(args, config.study.ks)
     validate(plan_config)
     # every input file is read before any work: a bad --placements fails in a second, not after the plan
     placement_files = find_placement_files(args.placements) if args.placements else {}

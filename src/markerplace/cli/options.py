@@ -4,7 +4,8 @@ discretization, scoring, placement and runtime options, and the
 
 ``--start`` X,Y is given in the user's (file) frame, metres; :func:`plan_inputs_in_scene_frame`
 moves it into the scene's internal frame after the run-size guard. Lengths are metres.
-Used by :mod:`markerplace.cli.main` (``plan``) and :mod:`markerplace.cli.evaluate`.
+Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` and
+:mod:`markerplace.cli.study`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 __all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
-           "plan_inputs_in_scene_frame"]
+           "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -76,6 +77,17 @@ def plan_config_from_args(args: argparse.Namespace):
                                 similarity=not args.no_similarity, seed=args.placement_seed)
     runtime = RuntimeConfig(workers=args.workers, cluster=args.cluster)
     return PlanConfig(discretize=disc, placement=placement, runtime=runtime)
+
+
+def plan_config_for_budgets(args: argparse.Namespace, ks):
+    """The plan config of ``evaluate``/``study`` arguments: their ``--k`` is a list of budgets
+    (it shares ``plan``'s ``k`` destination), so the plan places ``max(ks)`` markers and the
+    smaller budgets are its prefixes."""
+    from dataclasses import replace
+
+    args = argparse.Namespace(**{**vars(args), "k": max(ks)})
+    plan_config = plan_config_from_args(args)
+    return replace(plan_config, placement=replace(plan_config.placement, k=max(ks)))
 
 
 def add_plan_args(p: argparse.ArgumentParser) -> None:

@@ -19,7 +19,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     from ..testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
     from ..testbed.study import StudyPlan, run_study
     from ..validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
-    from .options import plan_config_from_args, plan_inputs_in_scene_frame
+    from .options import plan_config_for_budgets, plan_inputs_in_scene_frame
 
     ks = parse_int_list(args.k, "--k", EVAL_K)
     config = EvaluateConfig(test=TestSetConfig(tests=args.tests, seed=args.test_seed),
@@ -28,7 +28,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     plan = StudyPlan(vs=parse_float_list(args.vs, "--vs", V), shifts=parse_float_list(args.shifts, "--shifts", SHIFT),
                      scales=parse_float_list(args.scales, "--scales", TAG_SCALE),
                      detection_off=not args.no_detection_study, similarity_off=not args.no_similarity_study)
-    plan_config = plan_config_from_args(args)
+    plan_config = plan_config_for_budgets(args, ks)
     validate(plan_config)
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
