@@ -286,3 +286,11 @@ def test_bad_tum_sequences_give_one_line_errors(case, fragment, tmp_path, capsys
     extra = [] if case == "default intrinsics" else ["--intrinsics", str(root / "cam.json")]
     assert main(["--quiet", "fuse", str(root), "--out", str(tmp_path / "o.ply"), *extra]) == 2
     _one_line_error(capsys, fragment)
+
+
+def test_output_folder_checked_before_fusing(tmp_path, capsys):
+    root = _valid_set(tmp_path / "frames")
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert main(["--quiet", "fuse", str(root), "--out", str(blocker / "o.ply")]) == 2
+    _one_line_error(capsys, "is a file")

@@ -330,3 +330,11 @@ def test_discretization_of_the_scan_matches_the_original(tiny_scan):
                np.all((p > 0.3) & (p < 3.3)) for p in scan.locations)
     assert len(scan.locations) <= 1.1 * len(original.locations)  # no leak outside the room
     assert len(scan.candidate_position) >= 0.6 * len(original.candidate_position)
+
+
+def test_scan_export_checks_its_output_before_scanning(tmp_path, capsys):
+    """An unwritable OUT fails in a second, not after minutes of scanning (then a traceback)."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert main(["--quiet", "scene", "export", "house", str(blocker / "house_scan.ply"), "--as-scan"]) == 2
+    _one_line_error(capsys, "is a file")

@@ -30,7 +30,9 @@ def _check_ply(out: str, option: str) -> Path:
         raise UserError(f"{option} {out!r} must end in .ply (the fused mesh is written as binary PLY)")
     if path.exists() and path.is_dir():
         raise UserError(f"{option} {out!r} is a folder; give a .ply file path")
-    return path
+    from ..output_checks import check_output_file
+
+    return check_output_file(path, option)  # before the fusion: a scan takes minutes
 
 
 def fuse_config_from_args(args: argparse.Namespace):
