@@ -336,5 +336,5 @@ def test_scan_export_checks_its_output_before_scanning(tmp_path, capsys):
     """An unwritable OUT fails in a second, not after minutes of scanning (then a traceback)."""
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    assert main(["--quiet", "scene", "export", "house", str(blocker / "house_scan.ply"), "--as-scan"]) == 2
+    assert main(["--quiet", "scene", "export", "tiny", str(blocker / "tiny_scan.ply"), "--as-scan"]) == 2
     _one_line_error(capsys, "is a file")

@@ -1,7 +1,7 @@
 """Output paths checked before any work starts: ``--out`` folders and output files.
 
-:func:`check_output_dir` (``--out`` of ``plan``/``evaluate``) and :func:`check_output_file`
-(``render --out PREFIX``, ``scene export OUT``) prove the place is writable with a real test
+:func:`check_output_dir` (``--out`` of ``plan``/``evaluate``/``study``) and :func:`check_output_file`
+(``render --out PREFIX``, ``scene export OUT``, ``fuse --out``, ``export --gltf``) prove the place is writable with a real test
 write in it or in the nearest existing folder above it (``os.access`` says yes to root even on
 read-only folders); they create nothing, so a refused run leaves no empty folder behind. Both
 raise :class:`~markerplace.errors.UserError` (one line, exit code 2).

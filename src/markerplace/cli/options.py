@@ -11,6 +11,7 @@ Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` 
 from __future__ import annotations
 
 import argparse
+from typing import Sequence
 
 __all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
            "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
@@ -79,15 +80,15 @@ def plan_config_from_args(args: argparse.Namespace):
     return PlanConfig(discretize=disc, placement=placement, runtime=runtime)
 
 
-def plan_config_for_budgets(args: argparse.Namespace, ks):
-    """The plan config of ``evaluate``/``study`` arguments: their ``--k`` is a list of budgets
-    (it shares ``plan``'s ``k`` destination), so the plan places ``max(ks)`` markers and the
-    smaller budgets are its prefixes."""
-    from dataclasses import replace
+def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
+    """The :class:`~markerplace.plan.planner.PlanConfig` of ``evaluate``/``study`` arguments.
 
-    args = argparse.Namespace(**{**vars(args), "k": max(ks)})
-    plan_config = plan_config_from_args(args)
-    return replace(plan_config, placement=replace(plan_config.placement, k=max(ks)))
+    Their ``--k`` is a comma list of budgets held in the same ``args.k`` that ``plan`` uses for
+    its one budget, so it is read here as ``ks`` (the parsed budgets, each >= 1): the plan places
+    ``max(ks)`` markers and the smaller budgets are evaluated on their own placements or prefixes.
+    ``args`` is not changed.
+    """
+    return plan_config_from_args(argparse.Namespace(**{**vars(args), "k": max(ks)}))
 
 
 def add_plan_args(p: argparse.ArgumentParser) -> None:

@@ -28,11 +28,9 @@ def _check_ply(out: str, option: str) -> Path:
     path = Path(out)
     if path.suffix.lower() != ".ply":
         raise UserError(f"{option} {out!r} must end in .ply (the fused mesh is written as binary PLY)")
-    if path.exists() and path.is_dir():
-        raise UserError(f"{option} {out!r} is a folder; give a .ply file path")
     from ..output_checks import check_output_file
 
-    return check_output_file(path, option)  # before the fusion: a scan takes minutes
+    return check_output_file(path, option)  # a folder, a file above it, no write: before the minutes of fusion
 
 
 def fuse_config_from_args(args: argparse.Namespace):
@@ -74,7 +72,7 @@ def cmd_scene_export_scan(args: argparse.Namespace) -> int:
     name = str(args.name).strip().lower()
     if name not in builtin_names():
         raise UserError(f"--as-scan works on built-in scenes only ({', '.join(builtin_names())}), not {args.name!r}")
-    out = _check_ply(args.out, "OUT")
+    out = _check_ply(args.out, "scene export OUT")
     config = ScanConfig()
     if args.voxel is not None:
         config = replace(config, fuse=replace(config.fuse, voxel=float(args.voxel)))
