@@ -136,3 +136,30 @@ def test_expected_recall_plan_is_calibrated_on_map_images_and_cached(tmp_path):
     assert main(args) == 0  # the calibration stage is reused
     assert model_file.stat().st_mtime_ns == stamp
     assert json.loads((out / "placement.json").read_text())["markers"] == placed
+
+
+def test_expected_recall_offgrid_calibration_fits_on_test_like_renders(tmp_path, monkeypatch):
+    from dataclasses import replace
+
+    from markerplace.plan.methods import ExpectedRecall
+
+    monkeypatch.setattr(ExpectedRecall, "default_conf", replace(ExpectedRecall.default_conf, calibration_images=40))
+    out = tmp_path / "plan"
+    args = ["plan", "tiny", "-k", "3", "--method", "expected-recall", "--calibration-poses", "offgrid",
+            "--out", str(out), *FAST]
+    assert main(args) == 0
+    model = json.loads((out / "success_model_expected-recall.json").read_text())
+    # the 40 off-grid images without tags, plus those whose source pose a calibration set changes
+    assert 40 < model["n"] <= 40 * 4 and model["slope"] >= 0
+    assert (out / "calibration" / "offgrid_base").is_dir()
+    assert len(json.loads((out / "placement.json").read_text())["markers"]) == 3
+    map_out = tmp_path / "map"
+    assert main([*args[:-len(FAST) - 4], "--calibration-poses", "map", "--out", str(map_out), *FAST]) == 0
+    assert json.loads((map_out / "success_model_expected-recall.json").read_text())["n"] != model["n"]
+
+
+def test_unknown_calibration_poses_is_a_one_line_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["plan", "tiny", "--method", "expected-recall", "--calibration-poses", "test", "--out", str(tmp_path)])
+    assert e.value.code == 2
+    assert "--calibration-poses" in capsys.readouterr().err

@@ -127,6 +127,27 @@ def test_same_seed_same_poses_and_round_trip(tmp_path):
     assert np.array_equal(loaded.world_from_cam, a.world_from_cam) and np.array_equal(loaded.source_index, a.source_index)
 
 
+def test_another_stream_of_the_same_seed_draws_other_poses():
+    poses, _ = _feasible()
+    scores = np.random.default_rng(0).normal(size=len(poses))
+    occ, origin, res = _open_grid()
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
+    test = tposes.sample_test_poses(poses, scores, 0.5, tposes.TestPoseConfig(num=50, mode="uniform", seed=5), free)
+    calib = tposes.sample_test_poses(poses, scores, 0.5,
+                                     tposes.TestPoseConfig(num=50, mode="uniform", seed=5, stream=1), free)
+    again = tposes.sample_test_poses(poses, scores, 0.5,
+                                     tposes.TestPoseConfig(num=50, mode="uniform", seed=5, stream=1), free)
+    assert np.array_equal(calib.world_from_cam, again.world_from_cam)  # deterministic
+    # no pose in common: the off-grid calibration images are never test images
+    d = np.linalg.norm(test.world_from_cam[:, None, :2, 3] - calib.world_from_cam[None, :, :2, 3], axis=-1)
+    assert d.min() > 1e-9
+    # stream 0 is the plain seed: test poses drawn before the option existed are unchanged
+    rng = np.random.default_rng(5)
+    first = rng.choice(len(poses), size=100, p=tposes.sampling_probabilities(scores, "uniform"))
+    kept = first[free(poses[first, :2, 3] + rng.uniform(-0.5, 0.5, size=(100, 2)) * 0.5)]
+    assert len(kept) >= 5 and np.array_equal(test.source_index[:5], kept[:5])
+
+
 def test_no_free_space_is_a_user_error():
     poses, _ = _feasible(n_side=2)
     occ, origin, res = _open_grid()

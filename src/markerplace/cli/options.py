@@ -75,7 +75,8 @@ def plan_config_from_args(args: argparse.Namespace):
                    marker_spacing=args.marker_spacing)  # tag_size: derived from placement's by PlanConfig
     placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
                                 marker_model=args.marker_model, tag_size=args.tag_size,
-                                similarity=not args.no_similarity, seed=args.placement_seed)
+                                similarity=not args.no_similarity, seed=args.placement_seed,
+                                calibration_poses=args.calibration_poses)
     runtime = RuntimeConfig(workers=args.workers, cluster=args.cluster)
     return PlanConfig(discretize=disc, placement=placement, runtime=runtime)
 
@@ -94,7 +95,7 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
 def add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
     from ..plan.marker_models import MARKER_MODELS
-    from ..plan.methods import PLACEMENT_METHODS
+    from ..plan.methods import CALIBRATION_POSES, PLACEMENT_METHODS
 
     g = p.add_argument_group("discretization")
     g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
@@ -111,6 +112,10 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--marker-model", default="paper", choices=MARKER_MODELS.names(),
                    help=f"marker information model: {MARKER_MODELS.help()} (default paper)")
     g.add_argument("--no-similarity", action="store_true", help="turn the look-alike (similarity) analysis off")
+    g.add_argument("--calibration-poses", default="map", choices=CALIBRATION_POSES,
+                   help="images expected-recall fits its success model on: map (the map images, each without its "
+                        "own location) or offgrid (1000 test-like renders between the map poses, never test "
+                        "images) (default map)")
     randomized = "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
     g.add_argument("--placement-seed", type=int, default=0, help=f"seed of the {randomized} placements (default 0)")
     g.add_argument("--workers", type=int, default=0, help="processes for rendering + SIFT (default: CPU count, at most 4; 1 = in this process)")

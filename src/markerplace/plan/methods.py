@@ -42,6 +42,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 log = logging.getLogger(__name__)
 
+#: Images ``expected-recall`` may fit its success model on (``--calibration-poses``).
+CALIBRATION_POSES = ("map", "offgrid")
+
 #: Every placement method by name, in registration order (``--method``, ``--methods``).
 PLACEMENT_METHODS = Registry("placement method", "--method")
 
@@ -136,7 +139,13 @@ def method_from_config(config: PlacementConfig) -> PlacementMethod:
     """The method ``config.method``, its settings taken from ``config`` where it has a field of
     the same name (OMP's ``v`` and ``lazy`` are ``PlacementConfig.v`` and ``.lazy``: the run's
     settings have one home, PlacementConfig); any other setting keeps its ``default_conf``."""
-    cls = PLACEMENT_METHODS.lookup(config.method)
+    return method_named(config.method, config)
+
+
+def method_named(name: str, config: PlacementConfig) -> PlacementMethod:
+    """The method ``name`` with its settings taken from ``config`` as :func:`method_from_config`
+    does (for a method other than ``config.method``, e.g. each of ``evaluate --methods``)."""
+    cls = PLACEMENT_METHODS.lookup(name)
     shared = {f.name: getattr(config, f.name) for f in dataclasses.fields(cls.default_conf)
               if hasattr(config, f.name)}
     return cls(**shared)
@@ -277,13 +286,19 @@ class ExpectedRecall(PlacementMethod):
             calibration_runs: seeded random tag sets the map images are localized with, besides
                 none (default 3).
             calibration_k: tags per calibration set (default 20, at most the candidates).
-            calibration_seed: seed of the calibration sets (default 0).
+            calibration_seed: seed of the calibration sets and of the off-grid poses (default 0).
+            calibration_poses: ``map`` (default: the map images, leave one location out) or
+                ``offgrid`` (test-like renders, ``PlacementConfig.calibration_poses``,
+                ``--calibration-poses``).
+            calibration_images: off-grid images drawn (``offgrid`` only; default 1000).
         """
 
         tag_model: str = "corners"
         calibration_runs: int = 3
         calibration_k: int = 20
         calibration_seed: int = 0
+        calibration_poses: str = "map"
+        calibration_images: int = 1000
 
     default_conf = Config()
 
@@ -308,4 +323,5 @@ class ExpectedRecall(PlacementMethod):
 
 
 __all__ = ["OMP", "PLACEMENT_METHODS", "ExpectedRecall", "Choice", "HumanPlacement", "PlacementMethod", "RandomPlacement",
-           "UniformPlacement", "get_placement_method", "method_from_config"]
+           "UniformPlacement", "get_placement_method", "method_from_config", "method_named",
+           "CALIBRATION_POSES"]

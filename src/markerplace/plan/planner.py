@@ -37,7 +37,7 @@ from .localizability import (
 )
 from .observe import observe
 from .marker_models import MARKER_MODELS, get_marker_model
-from .methods import PLACEMENT_METHODS, method_from_config
+from .methods import CALIBRATION_POSES, PLACEMENT_METHODS, method_from_config
 from .placement import MarkerCoverage, apply_coverages, check_k
 from .similarity import SimilarityConfig, count_similar
 
@@ -65,6 +65,11 @@ class PlacementConfig:
         seed: seed of the randomized methods (random and uniform).
         first_tag_id: tag id of the first placed marker; ids count up in placement order,
             skipping ids of existing markers.
+        calibration_poses: images ``expected-recall`` fits its success model on (map images
+            only, never test images): ``map`` (the map images, each localized against the map
+            without its own location) or ``offgrid`` (renders at test-like poses, map poses
+            perturbed within a grid cell and +-22.5 deg of yaw, localized against the whole
+            map; :mod:`markerplace.testbed.calibration`).
     """
 
     k: int = 20
@@ -76,6 +81,7 @@ class PlacementConfig:
     lazy: bool = True
     seed: int = 0
     first_tag_id: int = 0
+    calibration_poses: str = "map"
 
 
 @dataclass(frozen=True)
@@ -143,6 +149,8 @@ def validate(config: PlanConfig) -> None:
     p = config.placement
     PLACEMENT_METHODS.lookup(p.method)  # UserError naming the known ones
     MARKER_MODELS.lookup(p.marker_model)
+    if p.calibration_poses not in CALIBRATION_POSES:
+        raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
     from ..validation import check_plan_config
 
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)

@@ -57,11 +57,8 @@ class EvaluationResult:
 def _test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
     from . import poses as tp
 
-    disc = data.disc
-    map_poses = np.asarray(disc.world_from_cam, float)
-    layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
-    is_free = tp.free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, config.test.min_clearance,
-                                    np.array([layer[int(st)] for st in disc.pose_storey], dtype=np.int64))
+    map_poses = np.asarray(data.disc.world_from_cam, float)
+    is_free = tp.free_space_of(data.disc, config.test.min_clearance)
     poses = {}
     for ts in config.test.sets:  # a test set's seed does not depend on which other sets run
         tcfg = tp.TestPoseConfig(num=config.test.tests, mode=ts, seed=config.pose_seed + 1000 * tp.TEST_SETS.index(ts),

@@ -41,6 +41,10 @@ class TestPoseConfig:
             occupancy cell.
         seed: seed of ``numpy.random.default_rng``.
         max_rounds: give up (UserError) after this many rounds of redrawing.
+        stream: independent random stream of the same seed: 0 (test poses) draws from
+            ``default_rng(seed)``, any other value from ``default_rng([seed, stream])``, a stream
+            no integer seed reaches (``expected-recall``'s off-grid calibration images use 1, so
+            they are never test images, whatever ``--test-seed`` is).
     """
 
     __test__ = False  # not a pytest class
@@ -52,6 +56,7 @@ class TestPoseConfig:
     min_clearance: float = 0.1
     seed: int = 0
     max_rounds: int = 100
+    stream: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,6 +165,14 @@ def free_space_checker(occupancy: np.ndarray, origin: Sequence[float], resolutio
     return check
 
 
+def free_space_of(disc, min_clearance: float) -> Callable[..., np.ndarray]:
+    """:func:`free_space_checker` of a discretization (``markerplace.plan.discretization``): its
+    occupancy grids, one layer per planned storey, each feasible pose checked on its own storey."""
+    layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
+    return free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, min_clearance,
+                              np.array([layer[int(st)] for st in disc.pose_storey], dtype=np.int64))
+
+
 def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spacing: float,
                       config: TestPoseConfig, is_free: Callable[[np.ndarray], np.ndarray]) -> TestPoses:
     """Draw ``config.num`` perturbed test poses from the feasible poses.
@@ -180,7 +193,7 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
     if len(world_from_cam) == 0:
         raise UserError("no feasible camera poses to draw test poses from: check --height and --grid-spacing")
     probs = sampling_probabilities(np.asarray(scores, dtype=float), config.mode)
-    rng = np.random.default_rng(config.seed)
+    rng = np.random.default_rng(config.seed if config.stream == 0 else [config.seed, config.stream])
     yaws = np.arctan2(world_from_cam[:, 1, 2], world_from_cam[:, 0, 2])
     kept_idx, kept_dxy, kept_dyaw = [], [], []
     need = config.num
