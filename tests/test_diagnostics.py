@@ -158,6 +158,15 @@ def test_expected_recall_offgrid_calibration_fits_on_test_like_renders(tmp_path,
     assert json.loads((map_out / "success_model_expected-recall.json").read_text())["n"] != model["n"]
 
 
+def test_calibration_poses_without_expected_recall_warns(tmp_path, caplog):
+    import logging
+
+    with caplog.at_level(logging.WARNING):
+        assert main(["plan", "tiny", "-k", "2", "--calibration-poses", "offgrid", "--out", str(tmp_path / "p"), *FAST]) == 0
+    assert any("--calibration-poses offgrid has no effect with --method omp" in r.getMessage() for r in caplog.records)
+    assert not (tmp_path / "p" / "success_model_expected-recall.json").exists()
+
+
 def test_unknown_calibration_poses_is_a_one_line_error(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["plan", "tiny", "--method", "expected-recall", "--calibration-poses", "test", "--out", str(tmp_path)])

@@ -90,6 +90,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     config = plan_config_from_args(args)
     validate(config)
+    from ..plan.methods import PLACEMENT_METHODS
+
+    if config.placement.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(config.placement.method).calibrated:
+        log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
+                    "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing) if args.existing else []
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)

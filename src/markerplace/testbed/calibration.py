@@ -82,13 +82,14 @@ OFFGRID_STREAM = 1
 """Random stream of the off-grid poses (:attr:`~markerplace.testbed.poses.TestPoseConfig.stream`)."""
 
 
-def map_successes(predictions: dict, map_poses: np.ndarray, threshold=MAIN_THRESHOLD, set_name: str = MAP_SET) -> dict:
+def map_successes(predictions: dict, world_from_cam: np.ndarray, threshold=MAIN_THRESHOLD,
+                  set_name: str = MAP_SET) -> dict:
     """(method, run, k) -> (N,) bool: images of set ``set_name`` (default the map images)
-    localized within ``threshold`` (metres, deg) of ``map_poses`` (their true poses)."""
+    localized within ``threshold`` (metres, deg) of ``world_from_cam`` ((N, 4, 4), their true poses)."""
     out = {}
     for (method, run, k, name), est in predictions.items():
         if name == set_name:
-            out[(method, run, k)] = hit_mask(*pose_errors_batch(est, map_poses), *threshold)
+            out[(method, run, k)] = hit_mask(*pose_errors_batch(est, world_from_cam), *threshold)
     return out
 
 
