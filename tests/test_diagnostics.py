@@ -153,9 +153,42 @@ def test_expected_recall_offgrid_calibration_fits_on_test_like_renders(tmp_path,
     assert 40 < model["n"] <= 40 * 4 and model["slope"] >= 0
     assert (out / "calibration" / "offgrid_base").is_dir()
     assert len(json.loads((out / "placement.json").read_text())["markers"]) == 3
+    _check_offgrid_success_benchmark(out, 40)
     map_out = tmp_path / "map"
     assert main([*args[:-len(FAST) - 4], "--calibration-poses", "map", "--out", str(map_out), *FAST]) == 0
     assert json.loads((map_out / "success_model_expected-recall.json").read_text())["n"] != model["n"]
+
+
+def _check_offgrid_success_benchmark(plan_dir, images: int) -> None:
+    """benchmarks/offgrid_success.py rebuilds the plan's off-grid poses: with the plan's seed its
+    success rate is the plan's own; with another seed the cached predictions belong to other poses."""
+    import contextlib
+    import importlib.util
+    import io
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "offgrid_success.py"
+    spec = importlib.util.spec_from_file_location("offgrid_success", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+
+    def run(*extra) -> dict[str, str]:
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            bench.main([str(plan_dir), "--images", str(images), *extra])
+        return dict(line.split(": ", 1) for line in buf.getvalue().splitlines())
+
+    own = run()
+    assert int(own["offgrid_images"]) == images
+    per_storey = [int(v) for k, v in own.items() if k.startswith("offgrid_storey") and k.endswith("_images")]
+    assert sum(per_storey) == images
+    rate = float(own["offgrid_no_marker_success"])
+    assert rate >= 0.5  # the tiny scene's test-like renders mostly localize
+    for k, v in own.items():
+        if "failure_quartile" in k and v != "nan":
+            assert 0.0 <= float(v) <= 1.0
+    wrong = float(run("--seed", "1")["offgrid_no_marker_success"])
+    assert wrong < rate - 0.3  # predictions scored against poses they were not made for
 
 
 def test_calibration_poses_without_expected_recall_warns(tmp_path, caplog):
