@@ -216,6 +216,19 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path, capsys):
     assert [p.stat().st_mtime_ns for p in results] == stamps
     assert np.array_equal(tposes.TestPoses.load(out / "test_poses_weighted.npz").world_from_cam, poses)
     assert list(csv.DictReader((out / "recall.csv").open())) == rows
+    # determinism: a fresh folder evaluating other placements alongside (k = 1 first, no OMP)
+    # gives the shared placements bit-identical per-image errors (renders and results cached
+    # between placements must not leak into each other)
+    other = tmp_path / "other"
+    assert main(["evaluate", "tiny", "--out", str(other), "--tests", "20", "--k", "1,2", "--runs", "1",
+                 "--methods", "none,random", "--test-sets", "weighted", *FAST]) == 0
+    again = np.load(other / "query_errors.npz")
+    for method in ("none", "random"):
+        i = errs["weighted_method"].tolist().index(method)
+        j = [(m, int(k)) for m, k in zip(again["weighted_method"].tolist(), again["weighted_k"])].index(
+            (method, 0 if method == "none" else 2))
+        for name in ("weighted_t_err", "weighted_r_err"):
+            assert np.array_equal(errs[name][i], again[name][j], equal_nan=True), (method, name)
 
 
 def test_evaluate_bad_option_is_one_line_error(tmp_path, capsys):
