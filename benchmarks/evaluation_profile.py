@@ -1,6 +1,6 @@
 """Per-image cost profile of an evaluation: render, SIFT, tags, localization, tags in view.
 
-Reproduces the "one-off profile" of docs/results.md with the testbed's own functions. Prints
+Reproduces the "one-off profile" of docs/results/office.md with the testbed's own functions. Prints
 ``name: value`` lines (nothing else on stdout). For ``--images`` N test poses of ``--scene``,
 drawn from the plan's map poses as ``evaluate`` draws them (``sample_test_poses``, test set
 ``--test-set``, seed ``--seed``) and rendered with the first ``--k`` markers of ``--placement``,

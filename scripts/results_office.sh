@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The office results of docs/results.md: the evidence protocol (2000 test images per set, both
+# The office results of docs/results/office.md: the evidence protocol (2000 test images per set, both
 # test sets, k = 10 and 20, 4 random and 4 uniform runs; OMP with the paper's and the corners
 # marker model, human, expected-recall) with the oracle ceiling and the score's calibration on
 # map images. About 3.5 hours on 2 cores (each placement re-renders nearly every image: about

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The other scenes of docs/results.md, on one fixed protocol (chosen before any of them ran):
+# The other scenes of docs/results/*.md, on one fixed protocol (chosen before any of them ran):
 # 500 test images per set, both test sets, k = 5, 10, 20 (the room: 5 and 10, it has 13
 # candidate spots), 3 random and 3 uniform runs; OMP with
 # the paper's and the corners marker model, human, expected-recall; the oracle ceiling and the
