@@ -282,7 +282,7 @@ class ExpectedRecall(PlacementMethod):
 
         Attributes:
             tag_model: marker model of the scores it fits and optimizes (``corners``, default:
-                it predicts map-image localization better than ``paper``, docs/results.md).
+                it predicts map-image localization better than ``paper``, docs/results/office.md).
             calibration_runs: seeded random tag sets the map images are localized with, besides
                 none (default 3).
             calibration_k: tags per calibration set (default 20, at most the candidates).
