@@ -23,6 +23,7 @@ from ..imaging.config import ImagingConfig
 from ..imaging.engine import EngineSpec, imaging_job
 from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from ..imaging.visibility import marker_points
+from ..progress import progress_bar
 
 log = logging.getLogger(__name__)
 
@@ -58,8 +59,6 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
         key: identity of these inputs (parts written for other inputs are dropped).
         progress: a progress bar.
     """
-    from tqdm import tqdm
-
     N, C = len(world_from_cam), len(candidate_world_from_marker)
     samples = marker_points(candidate_world_from_marker, tag_sizes) if C else np.zeros((0, 5, 3))
     job = imaging_job(EngineSpec(scene_spec, config, {"candidates": samples}))
@@ -70,7 +69,7 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
         log.info("observe: resuming, %d of %d poses already done", len(done), N)
     mask = candidate_in_view if C else np.zeros((N, 0), bool)
     items = [(world_from_cam[i], mask[i]) for i in todo]
-    with tqdm(total=N, initial=len(done), desc="observe", unit="pose", disable=not progress, leave=False) as bar:
+    with progress_bar(N, "observe", "pose", progress, initial=len(done)) as bar:
         for j, feats in executor.map(_observe_task, items, job):
             writer.add(todo[j], feats)
             bar.update()

@@ -27,6 +27,7 @@ import numpy as np
 from ..errors import UserError
 from ..geometry import Intrinsics, invert
 from ..io_utils import atomic_path
+from ..progress import track
 
 log = logging.getLogger(__name__)
 
@@ -211,8 +212,6 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     Raises:
         UserError: a bad image (see :func:`~markerplace.scan.frames.load_frame`), or no surface.
     """
-    from tqdm import tqdm
-
     from .frames import load_frame
 
     config.validate()
@@ -220,7 +219,7 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     fusion = TSDFFusion(fs.intrinsics, config)
     t0 = time.perf_counter()
     empty = 0
-    for rec in tqdm(frames, desc="fuse", unit="frame", disable=not progress, leave=False):
+    for rec in track(frames, "fuse", "frame", progress):
         rgb, depth = load_frame(fs, rec)
         if not fusion.integrate(rgb, depth, fs.depth_scale, rec.world_from_cam):
             empty += 1

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..geometry import Intrinsics
+from ..progress import track
 from ..scene.types import Scene
 from .depth_noise import DEPTH_SCALE, DepthNoiseConfig, camera_rays, noisy_depth, to_depth_png
 from .fuse import FuseConfig, TSDFFusion
@@ -170,8 +171,6 @@ def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0
     Returns:
         :class:`ScanResult`.
     """
-    from tqdm import tqdm
-
     from .frames import FrameWriter
 
     t0 = time.perf_counter()
@@ -183,7 +182,7 @@ def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0
     valid_sum = 0.0
     try:
         with FrameSimulator(scene, config) as sim:
-            for i, T in enumerate(tqdm(poses, desc="scan", unit="frame", disable=not progress, leave=False)):
+            for i, T in enumerate(track(poses, "scan", "frame", progress)):
                 rgb, d16 = sim.frame(T, seeded_rng(seed, 2, i))
                 valid_sum += float(np.count_nonzero(d16)) / d16.size
                 fusion.integrate(rgb, d16, DEPTH_SCALE, T)

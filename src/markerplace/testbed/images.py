@@ -21,6 +21,7 @@ import numpy as np
 from ..imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
 from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from ..imaging.visibility import marker_points
+from ..progress import progress_bar
 from ..io_utils import write_npy
 from ..markers import Marker
 from ..runtime import cache
@@ -84,9 +85,7 @@ class TestbedImaging:
 
     def run(self, task, items: list, desc: str):
         """``(index, task(engine, items[index]))`` for every item, with a progress bar."""
-        from tqdm import tqdm
-
-        with tqdm(total=len(items), desc=desc, unit="img", disable=not self.progress, leave=False) as bar:
+        with progress_bar(len(items), desc, "img", self.progress) as bar:
             for i, r in self.executor.map(task, items, self.job):
                 bar.update()
                 yield i, r
