@@ -90,6 +90,6 @@ def test_plan_log_has_no_carriage_returns(tmp_path, capsys, quiet):
 
 
 def test_durations_read_as_a_person_would_write_them():
-    from markerplace.progress import _duration
+    from markerplace.progress import format_duration
 
-    assert [_duration(s) for s in (42.4, 75.2, 3600, 7500)] == ["42 s", "1 min 15 s", "1 h 00 min", "2 h 05 min"]
+    assert [format_duration(s) for s in (42.4, 75.2, 3600, 7500)] == ["42 s", "1 min 15 s", "1 h 00 min", "2 h 05 min"]

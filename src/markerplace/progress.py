@@ -16,7 +16,7 @@ from typing import Iterable, Iterator, TypeVar
 
 log = logging.getLogger("markerplace.progress")
 
-__all__ = ["progress_bar", "track", "LogProgress", "LOG_INTERVAL_S"]
+__all__ = ["progress_bar", "track", "LogProgress", "LOG_INTERVAL_S", "format_duration"]
 
 LOG_INTERVAL_S = 60.0
 """Seconds between two progress lines in a log (not a terminal)."""
@@ -24,8 +24,9 @@ LOG_INTERVAL_S = 60.0
 T = TypeVar("T")
 
 
-def _duration(seconds: float) -> str:
-    """``75.2`` -> ``'1 min 15 s'``; under a minute ``'42 s'``; from an hour ``'2 h 05 min'``."""
+def format_duration(seconds: float) -> str:
+    """A time span as a person writes it: ``75.2`` -> ``'1 min 15 s'``; under a minute ``'42 s'``;
+    from an hour ``'2 h 05 min'``. The one formatter of durations in logs and messages."""
     s = int(round(seconds))
     if s < 60:
         return f"{s} s"
@@ -63,7 +64,7 @@ class LogProgress:
             self._last = now
             rate = (self.n - self._start_n) / max(now - self._t0, 1e-9)
             left = (self.total - self.n) / rate if rate > 0 else float("inf")
-            eta = f", about {_duration(left)} left" if left != float("inf") else ""
+            eta = f", about {format_duration(left)} left" if left != float("inf") else ""
             speed = f"{rate:.1f} {self.unit}/s" if rate >= 1.0 else f"{1.0 / max(rate, 1e-9):.1f} s/{self.unit}"
             log.info("%s: %d/%d %s (%.0f %%), %s%s", self.desc, self.n, self.total, self.unit,
                      100.0 * self.n / max(self.total, 1), speed, eta)
@@ -75,7 +76,7 @@ class LogProgress:
         self._closed = True
         if self.n > self._start_n:
             log.info("%s: %d/%d %s in %s", self.desc, self.n, self.total, self.unit,
-                     _duration(self._clock() - self._t0))
+                     format_duration(self._clock() - self._t0))
 
     def __enter__(self) -> "LogProgress":
         return self

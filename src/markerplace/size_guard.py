@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import UserError
+from .progress import format_duration
 from .validation import OCCUPANCY_CELL
 
 log = logging.getLogger(__name__)
@@ -82,7 +83,7 @@ class RunEstimate:
     def describe(self) -> str:
         where = f"{self.footprint_m2:.0f} m^2 footprint" + (f" x {self.storeys} storeys" if self.storeys > 1 else "")
         text = (f"up to about {self.poses:,} camera poses ({where}), "
-                f"{_gib(self.memory_bytes)} of memory and {_duration(self.seconds)} on {self.workers} worker(s)")
+                f"{_gib(self.memory_bytes)} of memory and {format_duration(self.seconds)} on {self.workers} worker(s)")
         if self.queries:
             text += f" including {self.queries:,} test-image localizations"
         return text
@@ -90,14 +91,6 @@ class RunEstimate:
 
 def _gib(b: float) -> str:
     return f"{b / 2**30:.1f} GiB"
-
-
-def _duration(s: float) -> str:
-    if s < 90:
-        return f"{s:.0f} s"
-    if s < 5400:
-        return f"{s / 60:.0f} min"
-    return f"{s / 3600:.1f} h"
 
 
 def machine_memory_bytes() -> float:

@@ -21,9 +21,9 @@ import numpy as np
 from ..imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
 from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from ..imaging.visibility import marker_points
-from ..progress import progress_bar
 from ..io_utils import write_npy
 from ..markers import Marker
+from ..progress import progress_bar
 from ..runtime import cache
 
 log = logging.getLogger(__name__)
