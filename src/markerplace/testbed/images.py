@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -90,12 +90,19 @@ class TestbedImaging:
                 bar.update()
                 yield i, r
 
+    def render_iter(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
+                    map_only: bool, desc: str) -> Iterator[tuple[int, ImageFeatures]]:
+        """``(i, features)`` of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with
+        ``markers``, as the executor finishes them (in any order)."""
+        indices = [int(i) for i in indices]
+        items = [(world_from_cam[i], list(markers), map_only) for i in indices]
+        for j, f in self.run(_render_task, items, desc):
+            yield indices[j], f
+
     def render(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
                map_only: bool, desc: str) -> dict[int, ImageFeatures]:
         """Features of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with ``markers``."""
-        indices = [int(i) for i in indices]
-        items = [(world_from_cam[i], list(markers), map_only) for i in indices]
-        return {indices[j]: f for j, f in self.run(_render_task, items, desc)}
+        return dict(self.render_iter(world_from_cam, indices, markers, map_only, desc))
 
     def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple]:
         """Per image: the ``markers`` in view as sorted (union index, tag id) pairs, from the
@@ -107,11 +114,17 @@ class TestbedImaging:
         sub = np.asarray(in_view)[:, idx]
         return [tuple(sorted((int(idx[j]), ids[j]) for j in np.flatnonzero(row))) for row in sub]
 
+    def appearance(self, key: tuple) -> tuple:
+        """What a :meth:`view_keys` entry draws, independent of this run's union order: per
+        marker in view, its tag id, size and pose (as :func:`marker_key`)."""
+        return tuple(sorted((tag_id,) + _geometry_key(self.union[u]) for u, tag_id in key))
+
 
 class BaseImages:
     """Marker-free features (``features/``) and the (N, U) union-marker in-view mask
     (``in_view.npy``) of one image set, cached in ``folder``: features are keyed without
-    markers, the mask with the union (a new placement only costs depth renders)."""
+    markers, the mask with the union (a new placement only costs depth renders). ``key`` is
+    the features' cache key: it names the set's images (scene, poses, imaging settings)."""
 
     def __init__(self, imaging: TestbedImaging, world_from_cam: np.ndarray, folder: Path, key: str, map_only: bool,
                  name: str):
@@ -146,3 +159,4 @@ class BaseImages:
             cache.mark_done(mask_path, mask_key)
         self.features = feats
         self.in_view = mask.reshape(N, len(imaging.union))
+        self.key = feat_key

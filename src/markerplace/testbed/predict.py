@@ -31,6 +31,7 @@ from .images import BaseImages, TestbedImaging
 from .maps import localize_task, save_map
 from .placements import NO_MARKERS
 from .predictions import load_prediction, save_prediction
+from .render_store import RenderStore
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,10 +121,22 @@ class RenderedFeatures:
     """Features of the images of one set rendered with markers, keyed by (image, markers in
     view): an image is rendered again only when the markers in its view change, so nested
     placements (OMP's prefixes) share the renders of the images whose view they do not change.
-    Only the current placement's entries are kept."""
+    Only the current placement's entries are kept in memory; with a :class:`RenderStore`,
+    every render also goes to disk and is read back instead of rendered in later placements
+    and runs.
 
-    def __init__(self):
+    Args:
+        store: the folder's render store (None: keep nothing on disk).
+        set_key: the image set's features key (:attr:`BaseImages.key`); names its images in
+            the store.
+    """
+
+    def __init__(self, store: RenderStore | None = None, set_key: str = ""):
         self._features: dict[tuple, ImageFeatures] = {}
+        self.store, self.set_key = store, set_key
+
+    def _store_key(self, tb: TestbedImaging, i: int, key: tuple) -> str:
+        return cache.hash_of("render-v1", self.set_key, i, tb.appearance(key))
 
     def update(self, tb: TestbedImaging, world_from_cam: np.ndarray, keys: list, markers: Sequence, map_only: bool,
                desc: str, indices: Sequence[int] | None = None) -> dict[int, ImageFeatures]:
@@ -132,10 +145,22 @@ class RenderedFeatures:
         idx = range(len(keys)) if indices is None else indices
         used = {(i, keys[i]) for i in idx if keys[i]}
         need = sorted(i for i, _ in used if (i, keys[i]) not in self._features)
-        if need:
-            got = tb.render(world_from_cam, need, markers, map_only, desc)
+        if need and self.store is not None:
+            names = {i: self._store_key(tb, i, keys[i]) for i in need}
+            got = self.store.get(names.values())
             for i in need:
-                self._features[(i, keys[i])] = got[i]
+                if names[i] in got:
+                    self._features[(i, keys[i])] = got[names[i]]
+            if got:
+                log.debug("%s: %d of %d renders from the store", desc, len(got), len(need))
+            need = [i for i in need if names[i] not in got]
+        if need:
+            for i, f in tb.render_iter(world_from_cam, need, markers, map_only, desc):
+                self._features[(i, keys[i])] = f
+                if self.store is not None:
+                    self.store.put(self._store_key(tb, i, keys[i]), f)
+            if self.store is not None:
+                self.store.flush()
         for stale in [c for c in self._features if c not in used]:
             del self._features[stale]
         return {i: self._features[(i, k)] for i, k in used}
@@ -150,11 +175,13 @@ class PlacementMaps:
         map_base: marker-free map features and the map's in-view masks.
         codebook: the VLAD codebook.
         retrieval: the marker-free retrieval replay (None: no reuse of unchanged results).
+        store: where renders with markers are kept between runs (None: nowhere).
     """
 
-    def __init__(self, tb: TestbedImaging, map_base: BaseImages, codebook, retrieval: Retrieval | None):
+    def __init__(self, tb: TestbedImaging, map_base: BaseImages, codebook, retrieval: Retrieval | None,
+                 store: RenderStore | None = None):
         self.tb, self.map_base, self.codebook, self.retrieval = tb, map_base, codebook, retrieval
-        self._features = RenderedFeatures()
+        self._features = RenderedFeatures(store, map_base.key)
 
     @contextmanager
     def built(self, markers: Sequence, folder: Path, desc: str):
@@ -240,7 +267,7 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
 
 
 def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, sets: dict, codebook, cb_key: str, lcfg,
-                       imaging, cache_dir: Path, timings: dict, reuse: bool = True) -> dict:
+                       imaging, cache_dir: Path, timings: dict, reuse: bool = True, keep_renders: bool = True) -> dict:
     """Estimates of every image set against every placement's map, cached per (placement, set).
 
     Args:
@@ -256,6 +283,8 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
         cache_dir: ``predictions/`` and the temporary map folders go here.
         timings: ``map_with_markers`` and ``localize`` seconds are added.
         reuse: reuse the marker-free result where a placement cannot change it (exact).
+        keep_renders: keep every render with markers in ``cache_dir/renders``
+            (:class:`RenderStore`) and read back the ones earlier placements or runs made.
 
     Returns:
         (method, run, k, set name) -> (Q, 4, 4) estimates, NaN where localization failed.
@@ -273,8 +302,9 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
     retrieval = None
     if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
         retrieval = Retrieval(codebook, map_base, conf.num_candidates)
-    maps = PlacementMaps(tb, map_base, codebook, retrieval)
-    rendered = {s.name: RenderedFeatures() for s in sets.values()}
+    store = RenderStore(cache_dir / "renders") if keep_renders else None
+    maps = PlacementMaps(tb, map_base, codebook, retrieval, store)
+    rendered = {s.name: RenderedFeatures(store, s.base.key) for s in sets.values()}
     reused = 0
     for p in placements:
         marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]
