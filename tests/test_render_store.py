@@ -90,3 +90,57 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     run_evaluation(SceneSpec("tiny"), plan, replace(config, study=replace(config.study, ks=(1, 2))), out,
                    progress=False)
     assert 0 < len(rendered) == len(RenderStore(out / "cache" / "renders")) - before
+
+
+def test_candidate_tag_ids_are_fixed_by_spot():
+    from markerplace.markers import Marker
+    from markerplace.testbed.placements import PlacementRun, shift_markers, with_candidate_ids
+
+    rng = np.random.default_rng(0)
+    cands = np.tile(np.eye(4), (6, 1, 1))
+    cands[:, :3, 3] = rng.random((6, 3)) * 5
+    a = PlacementRun("omp", 0, 3, tuple(Marker(i, 0.4, cands[c]) for i, c in enumerate([4, 1, 2])))
+    b = PlacementRun("random", 2, 2, tuple(Marker(i, 0.3, cands[c] + 1e-7) for i, c in enumerate([1, 5])),
+                     test_sets=("weighted",))
+    moved = shift_markers(list(a.markers), 0.25, seed=0)
+    c = PlacementRun("omp", 0, 3, tuple(moved))
+    d = PlacementRun("other", 0, 1, (moved[1],))
+    got = with_candidate_ids([a, b, c, d], cands)
+    assert [m.tag_id for m in got[0].markers] == [4, 1, 2]
+    assert [m.tag_id for m in got[1].markers] == [1, 5] and got[1].test_sets == ("weighted",)
+    assert [m.tag_id for m in got[2].markers] == [6, 7, 8] and [m.tag_id for m in got[3].markers] == [7]
+    for new, old in zip(got, (a, b, c, d)):  # only the ids change
+        assert (new.method, new.run, new.k) == (old.method, old.run, old.k)
+        assert all(np.array_equal(x.world_from_marker, y.world_from_marker) and x.size == y.size
+                   for x, y in zip(new.markers, old.markers))
+    # more spots than tag36h11 codes: ids stay as placed
+    many = np.tile(np.eye(4), (600, 1, 1))
+    many[:, 0, 3] = np.arange(600)
+    e = PlacementRun("omp", 0, 2, (Marker(0, 0.4, many[599]), Marker(1, 0.4, many[3])))
+    assert [m.tag_id for m in with_candidate_ids([e], many)[0].markers] == [0, 1]
+
+
+def test_candidate_tag_ids_share_renders(tmp_path, monkeypatch):
+    """``--tag-ids candidate``: placements with the same spot in an image's view (random draws
+    at k = 2 and 3, OMP) draw the same image and share its render, so the run renders fewer
+    images than with ids in placement order."""
+    from markerplace.cli.main import main
+    from markerplace.testbed.images import TestbedImaging
+
+    counts: dict[str, int] = {}
+    real = TestbedImaging.render_iter
+    mode = {"now": ""}
+
+    def counting(self, world_from_cam, indices, markers, map_only, desc):
+        if markers:
+            counts[mode["now"]] = counts.get(mode["now"], 0) + len(indices)
+        return real(self, world_from_cam, indices, markers, map_only, desc)
+
+    monkeypatch.setattr(TestbedImaging, "render_iter", counting)
+    base = ["evaluate", "tiny", "--tests", "12", "--test-sets", "weighted", "--k", "2,3", "--runs", "2",
+            "--methods", "none,omp,random", "--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
+    for ids in ("order", "candidate"):
+        mode["now"] = ids
+        assert main(base + ["--out", str(tmp_path / ids), "--tag-ids", ids]) == 0
+        assert (tmp_path / ids / "tables.md").stat().st_size > 0
+    assert 0 < counts["candidate"] < counts["order"], counts

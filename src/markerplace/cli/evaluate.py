@@ -31,7 +31,7 @@ def evaluate_config_from_args(args: argparse.Namespace):
     return EvaluateConfig(
         test=TestSetConfig(tests=args.tests, sets=_name_list(args.test_sets), seed=args.test_seed),
         study=StudyConfig(methods=_name_list(args.methods), runs=args.runs, ks=_int_list(args.k, "--k"),
-                          tag_scale=args.tag_scale, shift=args.shift),
+                          tag_scale=args.tag_scale, shift=args.shift, tag_ids=args.tag_ids),
         localization=LocalizationConfig(localizer=args.localizer, use_tags=not args.no_tags,
                                         tag_corners=args.tag_corners),
         diagnostics=DiagnosticsConfig(ceiling=args.ceiling, calibration=args.calibration),
@@ -77,6 +77,7 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
     from ..plan.methods import PLACEMENT_METHODS
     from ..localization.localizer import LOCALIZERS
+    from ..testbed.config import TAG_IDS
     from ..testbed.placements import baseline_methods, method_names
     from .options import add_plan_args, add_scene_args
 
@@ -106,6 +107,10 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
     p.add_argument("--localizer", default="sift_pnp", choices=LOCALIZERS.names(),
                    help=f"localizer of the test images: {LOCALIZERS.help()} (default sift_pnp)")
+    p.add_argument("--tag-ids", default=TAG_IDS[0], choices=TAG_IDS,
+                   help="tag codes drawn: order (ids 0..k-1 in each placement's order, as every documented "
+                        "result) or candidate (id = candidate spot, the same in every placement, so placements "
+                        "share renders: cheaper ceilings and multi-k runs, results differ by noise) (default order)")
     g = p.add_argument_group("study switches")
     g.add_argument("--no-tags", action="store_true", help="localize without tag detection")
     g.add_argument("--tag-corners", action="store_true", help="also use detected tag corners as 2D-3D matches")

@@ -47,6 +47,14 @@ class StudyConfig:
             marker model still uses the nominal size).
         shift: markers are moved along their wall by +-shift metres, alternating sign with a
             seeded first sign (sensitivity study).
+        tag_ids: which tag36h11 code each drawn marker shows. ``order`` (default; every
+            result before this option was measured so): a placement's markers show ids 0..k-1
+            in placement order. ``candidate``: a marker on candidate spot c shows id c in every
+            placement, any other marker an id above the candidates, one per pose; then two
+            placements with the same spots in an image's view draw the same image, whose render
+            is shared (:mod:`markerplace.testbed.render_store`), which makes the ceiling's
+            single-tag runs and runs of several k cheaper. The codes differ, so results differ
+            from ``order`` by test-image noise.
     """
 
     methods: tuple[str, ...] = field(default_factory=method_names)
@@ -54,6 +62,7 @@ class StudyConfig:
     ks: tuple[int, ...] = (5, 10, 15, 20)
     tag_scale: float = 1.0
     shift: float = 0.0
+    tag_ids: str = "order"
 
 
 @dataclass(frozen=True)
@@ -116,6 +125,10 @@ class EvaluateConfig:
         return self.seed if self.test.seed is None else self.test.seed
 
 
+#: ``--tag-ids`` choices (:attr:`StudyConfig.tag_ids`).
+TAG_IDS = ("order", "candidate")
+
+
 def validate_evaluate_config(config: EvaluateConfig) -> None:
     """Raise :class:`UserError` (one line) for settings that cannot work."""
     from ..localization.localizer import LOCALIZERS
@@ -132,4 +145,6 @@ def validate_evaluate_config(config: EvaluateConfig) -> None:
         raise UserError("--ceiling and --calibration compare with no markers: keep 'none' in --methods")
     if diag.ceiling and (config.study.tag_scale != 1.0 or config.study.shift != 0.0):
         raise UserError("--ceiling places tags as planned: leave out --tag-scale and --shift (or --ceiling)")
+    if config.study.tag_ids not in TAG_IDS:
+        raise UserError(f"--tag-ids {config.study.tag_ids!r} is not valid: use one of {', '.join(TAG_IDS)}")
     check_evaluate_config(config)  # numbers: finite and in range (markerplace.validation)

@@ -100,7 +100,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     from ..markers import load_markers
     from ..plan.planner import prepare, validate
     from .config import validate_evaluate_config
-    from .placements import build_placements, find_placement_files
+    from .placements import build_placements, find_placement_files, with_candidate_ids
     from .report import write_outputs
 
     t_all = time.perf_counter()
@@ -139,6 +139,10 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         diag = config.diagnostics
         singles = single_placements(data.disc.candidate_world_from_marker, plan_config.placement.tag_size) \
             if diag.ceiling else []
+        by_spot = config.study.tag_ids == "candidate"
+        if by_spot:  # one code per spot in every run, so that runs share renders
+            placements = with_candidate_ids(placements, data.disc.candidate_world_from_marker)
+            singles = with_candidate_ids(singles, data.disc.candidate_world_from_marker)
         test_poses = _test_poses(out, config, plan_config, data, base_key, timings)
         union = list({marker_key(m): m for p in placements + singles for m in p.markers}.values())
         tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
@@ -166,6 +170,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
                                                         plan_config.placement.tag_size, predictions, test_poses,
                                                         config.study.ks)
+            if by_spot:
+                ceiling_runs = with_candidate_ids(ceiling_runs, data.disc.candidate_world_from_marker)
             predictions.update(predict_placements(tb, placements[:1] + ceiling_runs, map_base, test_sets, codebook,
                                                   cb_key, lcfg, imaging, cache_dir, timings, reuse_unchanged))
             placements = placements + ceiling_runs

@@ -88,6 +88,45 @@ def scale_markers(markers: Sequence, scale: float) -> list:
     return [Marker(m.tag_id, m.size * scale, np.array(m.world_from_marker, float), m.family) for m in markers]
 
 
+def with_candidate_ids(runs: Sequence[PlacementRun], candidate_world_from_marker: np.ndarray) -> list[PlacementRun]:
+    """The same marker sets with tag ids fixed by spot (``--tag-ids candidate``).
+
+    A marker on candidate spot c (pose within 1e-5 of the candidate's, any printed size)
+    shows id c in every run; any other marker (shifted, or from a placement file with its own
+    spots) an id from C up, one per pose, in order of first appearance. When the ids would
+    exceed the tag family, the runs are returned unchanged (ids in placement order) with a
+    warning.
+
+    Args:
+        runs: the marker sets (ids as placed).
+        candidate_world_from_marker: (C, 4, 4) candidate poses.
+    """
+    import logging
+
+    from ..markers import Marker
+    from ..render.tags import NUM_TAGS
+
+    cands = np.asarray(candidate_world_from_marker, float).reshape(-1, 16)
+    others: dict[tuple, int] = {}
+
+    def spot(m) -> int:
+        T = np.asarray(m.world_from_marker, float).reshape(16)
+        d = np.abs(cands - T).max(axis=1) if len(cands) else np.zeros(0)
+        j = int(np.argmin(d)) if len(d) else -1
+        if j >= 0 and d[j] <= 1e-5:
+            return j
+        return len(cands) + others.setdefault(tuple(np.round(T, 4)), len(others))
+
+    ids = [[spot(m) for m in r.markers] for r in runs]
+    if len(cands) + len(others) > NUM_TAGS:
+        logging.getLogger(__name__).warning("--tag-ids candidate: %d spots need more ids than tag36h11 has (%d); "
+                                            "ids stay in placement order", len(cands) + len(others), NUM_TAGS)
+        return list(runs)
+    return [PlacementRun(r.method, r.run, r.k, tuple(Marker(i, m.size, np.array(m.world_from_marker, float), m.family)
+                                                     for i, m in zip(rid, r.markers)), r.test_sets)
+            for r, rid in zip(runs, ids)]
+
+
 def build_placements(data, placement_config, config,
                      extra: dict[str, Sequence] | None = None) -> list[PlacementRun]:
     """Every marker set to evaluate, in processing order.
