@@ -77,7 +77,10 @@ class RenderStore:
         for p, wanted in by_part.items():
             with np.load(p, allow_pickle=False) as z:
                 fs = FeatureSet(**{n: z[n] for n in FeatureSet.FIELDS})
-            out.update({k: fs.image(j) for k, j in wanted})
+            for k, j in wanted:  # copies: a held render must not keep its whole part in memory
+                f = fs.image(j)
+                out[k] = ImageFeatures(f.keypoints.copy(), f.descriptors.copy(), f.points_world.copy(),
+                                       f.tag_ids.copy(), f.tag_corners.copy())
         return out
 
     def put(self, key: str, features: ImageFeatures) -> None:
