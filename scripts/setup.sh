@@ -2,7 +2,8 @@
 # Set up markerplace on a fresh Debian/Ubuntu machine:
 #   1. the Debian packages the headless renderer needs (Mesa EGL, llvmpipe), when missing;
 #   2. a virtual environment at .venv in the repository root;
-#   3. the package (editable) with its test dependencies.
+#   3. the package (editable) with its test dependencies, at the exact versions of
+#      constraints.txt (the reference environment of docs/results.md).
 # Safe to run again: each step is skipped when already done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,11 +35,11 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 stamp=.venv/.markerplace-setup
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+want=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setup: installing Python dependencies into .venv"
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e ".[test]"
+  .venv/bin/python -m pip install -q -e ".[test]" -c constraints.txt
   echo "$want" > "$stamp"
 fi
 echo "setup: ready (.venv/bin/markerplace)"

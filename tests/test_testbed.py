@@ -193,6 +193,8 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path, capsys):
                 for ts in ("weighted", "uniform") for th in ("1cm/1deg", "5cm/5deg", "10cm/10deg", "1m/30deg")}
     assert got == expected and len(rows) == len(expected)
     assert all(r["scene"] == "tiny" and r["n_tests"] == "20" and 0.0 <= float(r["recall"]) <= 1.0 for r in rows)
+    env = json.loads((out / "config.json").read_text())["environment"]  # what the numbers were computed with
+    assert env["packages"]["numpy"] == np.__version__ and "GL_RENDERER" in env["gl"]
     for r in rows:  # recall is monotone in the threshold
         if r["threshold"] == "1cm/1deg":
             loose = next(x for x in rows if x["threshold"] == "1m/30deg" and

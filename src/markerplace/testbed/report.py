@@ -82,7 +82,10 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     curves = recall_curves(rows, scene_name, ts0, main, ks)
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
-    write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config)})
+    from ..runtime.environment import environment
+
+    write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config),
+                                     "environment": environment()})
     from ..report.eval_report import write_evaluation_report
 
     write_evaluation_report(out, scene_name, placements, predictions, test_poses, config, plan_config.imaging.camera,
