@@ -50,7 +50,7 @@ from ..runtime.stages import cached
 from .images import BaseImages, TestbedImaging
 from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from .metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from .placements import NO_MARKERS, PlacementRun
+from .placements import NO_MARKERS, PlacementRun, candidate_of
 from .predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
@@ -110,12 +110,10 @@ def placement_candidates(markers, candidate_world_from_marker: np.ndarray, tag_s
     above the 1e-6 rounding of placement.json, and its size is ``tag_size``), or None when some
     marker is not a candidate (a shifted tag, one printed at another size, a placement file
     with its own spots)."""
-    cands = np.asarray(candidate_world_from_marker, float).reshape(-1, 16)
     out = []
     for m in markers:
-        d = np.abs(cands - np.asarray(m.world_from_marker, float).reshape(1, 16)).max(axis=1)
-        j = int(np.argmin(d)) if len(d) else -1
-        if j < 0 or d[j] > atol or abs(float(m.size) - float(tag_size)) > 1e-9:
+        j = candidate_of(m.world_from_marker, candidate_world_from_marker, atol)
+        if j < 0 or abs(float(m.size) - float(tag_size)) > 1e-9:
             return None
         out.append(j)
     return np.asarray(out, dtype=np.int64)
@@ -224,8 +222,10 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
                 image_set = ImageSet(OFFGRID_SET, queries.world_from_cam, base)
                 true_poses, source = queries.world_from_cam, queries.source_index
                 what = "off-grid images localized against the map"
+            # (its renders are not kept: the fitted model is what is cached, and its random tag
+            # sets rarely recur in an evaluation)
             preds = predict_placements(tb, placements, map_base, {image_set.name: image_set}, codebook, cb_key, lcfg,
-                                       imaging, folder, timings)
+                                       imaging, folder, timings, keep_renders=False)
             s, y, tagged = _pairs(data, covs, map_successes(preds, true_poses, set_name=image_set.name), sets, source)
             model = fit_success_model(s, y)
             log.info("calibration (%s, %s model): %d %s, %d of %d samples succeed (%d with tags); "

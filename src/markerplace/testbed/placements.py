@@ -88,6 +88,17 @@ def scale_markers(markers: Sequence, scale: float) -> list:
     return [Marker(m.tag_id, m.size * scale, np.array(m.world_from_marker, float), m.family) for m in markers]
 
 
+def candidate_of(world_from_marker: np.ndarray, candidate_world_from_marker: np.ndarray, atol: float = 1e-5) -> int:
+    """Index of the candidate whose (4, 4) pose equals ``world_from_marker`` within ``atol``
+    (above the 1e-6 rounding of placement.json), or -1 when none does."""
+    cands = np.asarray(candidate_world_from_marker, float).reshape(-1, 16)
+    if not len(cands):
+        return -1
+    d = np.abs(cands - np.asarray(world_from_marker, float).reshape(1, 16)).max(axis=1)
+    j = int(np.argmin(d))
+    return j if d[j] <= atol else -1
+
+
 def with_candidate_ids(runs: Sequence[PlacementRun], candidate_world_from_marker: np.ndarray) -> list[PlacementRun]:
     """The same marker sets with tag ids fixed by spot (``--tag-ids candidate``).
 
@@ -106,21 +117,19 @@ def with_candidate_ids(runs: Sequence[PlacementRun], candidate_world_from_marker
     from ..markers import Marker
     from ..render.tags import NUM_TAGS
 
-    cands = np.asarray(candidate_world_from_marker, float).reshape(-1, 16)
+    C = len(candidate_world_from_marker)
     others: dict[tuple, int] = {}
 
     def spot(m) -> int:
-        T = np.asarray(m.world_from_marker, float).reshape(16)
-        d = np.abs(cands - T).max(axis=1) if len(cands) else np.zeros(0)
-        j = int(np.argmin(d)) if len(d) else -1
-        if j >= 0 and d[j] <= 1e-5:
+        j = candidate_of(m.world_from_marker, candidate_world_from_marker)
+        if j >= 0:
             return j
-        return len(cands) + others.setdefault(tuple(np.round(T, 4)), len(others))
+        return C + others.setdefault(tuple(np.round(np.asarray(m.world_from_marker, float).ravel(), 4)), len(others))
 
     ids = [[spot(m) for m in r.markers] for r in runs]
-    if len(cands) + len(others) > NUM_TAGS:
+    if C + len(others) > NUM_TAGS:
         logging.getLogger(__name__).warning("--tag-ids candidate: %d spots need more ids than tag36h11 has (%d); "
-                                            "ids stay in placement order", len(cands) + len(others), NUM_TAGS)
+                                            "ids stay in placement order", C + len(others), NUM_TAGS)
         return list(runs)
     return [PlacementRun(r.method, r.run, r.k, tuple(Marker(i, m.size, np.array(m.world_from_marker, float), m.family)
                                                      for i, m in zip(rid, r.markers)), r.test_sets)
