@@ -145,8 +145,8 @@ class RenderedFeatures:
         idx = range(len(keys)) if indices is None else indices
         used = {(i, keys[i]) for i in idx if keys[i]}
         need = sorted(i for i, _ in used if (i, keys[i]) not in self._features)
-        if need and self.store is not None:
-            names = {i: self._store_key(tb, i, keys[i]) for i in need}
+        names = {i: self._store_key(tb, i, keys[i]) for i in need} if self.store is not None else {}
+        if names:
             got = self.store.get(names.values())
             for i in need:
                 if names[i] in got:
@@ -158,7 +158,7 @@ class RenderedFeatures:
             for i, f in tb.render_iter(world_from_cam, need, markers, map_only, desc):
                 self._features[(i, keys[i])] = f
                 if self.store is not None:
-                    self.store.put(self._store_key(tb, i, keys[i]), f)
+                    self.store.put(names[i], f)
             if self.store is not None:
                 self.store.flush()
         for stale in [c for c in self._features if c not in used]:
