@@ -14,10 +14,16 @@ features and the VLAD codebook are shared and only the marker stages run again).
 store's size; ``seconds_<mode>``: the evaluation's map-with-markers and localize stages, from
 ``timings.json``; ``recall_omp_<mode>``: OMP's recall per k, from ``recall.csv``) and the ratios
 ``renders_ratio`` and ``seconds_ratio`` (candidate / order). The two modes draw different tag
-codes, so their recalls differ by noise; they are printed to show that, not compared.
+codes, so their recalls differ by noise; how much is printed, not tested: per marker set (method,
+run, k) on the same test images, ``flipped_images_mean`` / ``flipped_images_max`` (test images
+localized at 5 cm / 5 deg in one mode and not in the other, as a share of the test images) and
+``recall_change_mean`` / ``recall_change_max`` (absolute recall change, points).
 
     .venv/bin/python benchmarks/tag_ids.py [--scene room] [--tests 200] [--k 5,10] [--runs 2] \\
-        [--ceiling] [--out DIR]
+        [--ceiling] [--out DIR] [--report-only]
+
+``--report-only`` prints the figures of an earlier run kept with ``--out`` without running it
+again (its ``seconds_*`` are that run's, from ``timings.json``).
 
 Default: the built-in room, 200 weighted test images, k = 5 and 10, 2 random and 2 uniform
 runs, with the oracle ceiling (13 single-tag runs), in a temporary folder.
@@ -31,6 +37,8 @@ import json
 import shutil
 import subprocess
 import sys
+
+import numpy as np
 import tempfile
 import time
 from pathlib import Path
@@ -38,6 +46,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from markerplace.testbed.metrics import hit_mask  # noqa: E402
 from markerplace.testbed.render_store import RenderStore  # noqa: E402
 
 MODES = ("order", "candidate")
@@ -82,6 +91,26 @@ def _omp_recall(out: Path) -> str:
     return ", ".join(cells) or "(not found)"
 
 
+def _successes(out: Path) -> tuple[list[tuple], np.ndarray]:
+    """(method, run, k) per marker set and its (sets, images) bool success at 5 cm / 5 deg."""
+    with np.load(out / "query_errors.npz", allow_pickle=False) as z:
+        sets = list(zip(z["weighted_method"].tolist(), z["weighted_run"].tolist(), z["weighted_k"].tolist()))
+        success = hit_mask(z["weighted_t_err"], z["weighted_r_err"], 0.05, 5.0)
+    return sets, success
+
+
+def _code_noise(base: Path) -> dict[str, float]:
+    """Flipped test images and recall changes between the two modes, over the marker sets with tags."""
+    sets_a, ok_a = _successes(base / MODES[0])
+    sets_b, ok_b = _successes(base / MODES[1])
+    common = [s for s in sets_a if s in sets_b and s[2] > 0]
+    flips = np.array([(ok_a[sets_a.index(s)] != ok_b[sets_b.index(s)]).mean() for s in common])
+    change = np.array([abs(ok_a[sets_a.index(s)].mean() - ok_b[sets_b.index(s)].mean()) * 100 for s in common])
+    return {"marker_sets_compared": len(common), "flipped_images_mean": float(flips.mean()),
+            "flipped_images_max": float(flips.max()), "recall_change_mean": float(change.mean()),
+            "recall_change_max": float(change.max())}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="room")
@@ -90,24 +119,29 @@ def main(argv=None) -> None:
     parser.add_argument("--runs", type=int, default=2)
     parser.add_argument("--ceiling", action=argparse.BooleanOptionalAction, default=True)
     parser.add_argument("--out", type=Path, default=None, help="folder kept after the run")
+    parser.add_argument("--report-only", action="store_true", help="print an earlier --out run's figures")
     args = parser.parse_args(argv)
+    if args.report_only and args.out is None:
+        parser.error("--report-only needs --out, the folder of an earlier run")
 
     base = args.out or Path(tempfile.mkdtemp(prefix="markerplace_tag_ids_"))
     renders, seconds = {}, {}
     for mode in MODES:
         out = base / mode
-        if mode == "candidate" and not out.exists():
-            _copy_without_tags(base / "order", out)
-        wall = _evaluate(args, out, mode)
+        if not args.report_only:
+            if mode == "candidate" and not out.exists():
+                _copy_without_tags(base / "order", out)
+            emit(f"wall_seconds_{mode}", _evaluate(args, out, mode))
         timings = json.loads((out / "timings.json").read_text())
         renders[mode] = len(RenderStore(out / "cache" / "renders"))
         seconds[mode] = float(timings["map_with_markers"] + timings["localize"])
         emit(f"renders_{mode}", renders[mode])
         emit(f"seconds_{mode}", seconds[mode])
-        emit(f"wall_seconds_{mode}", wall)
         emit(f"recall_omp_{mode}", _omp_recall(out))
     emit("renders_ratio", renders["candidate"] / max(renders["order"], 1))
     emit("seconds_ratio", seconds["candidate"] / max(seconds["order"], 1e-9))
+    for name, value in _code_noise(base).items():
+        emit(name, value)
     if args.out is None:
         shutil.rmtree(base, ignore_errors=True)
 
