@@ -125,6 +125,9 @@ def main(argv=None) -> None:
         parser.error("--report-only needs --out, the folder of an earlier run")
 
     base = args.out or Path(tempfile.mkdtemp(prefix="markerplace_tag_ids_"))
+    if not args.report_only and any((base / mode / "timings.json").exists() for mode in MODES):
+        parser.error(f"{base} already holds a run (its seconds would be a resumed run's): "
+                     "pass --report-only to print it, or a new --out")
     renders, seconds = {}, {}
     for mode in MODES:
         out = base / mode

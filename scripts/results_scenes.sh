@@ -15,7 +15,7 @@ for name in $SCENES; do
   scene=$name
   ks=5,10,20; kmax=20
   if [ "$name" = room ]; then ks=5,10; kmax=10; fi
-  if [ -n "${K:-}" ]; then ks=$K; kmax=${K##*,}; fi
+  if [ -n "${K:-}" ]; then ks=$K; kmax=$(tr ',' '\n' <<<"$K" | sort -n | tail -1); fi
   if [ "$name" = office_scan ]; then
     scene=out/scans/office_scan.ply
     [ -f "$scene" ] || $MP --quiet scene export office "$scene" --as-scan
