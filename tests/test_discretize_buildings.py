@@ -195,3 +195,41 @@ def test_platform_and_step_heights():
     on_bed = _in(d.locations, (1.0, 1.0, 3.0, 2.6))
     assert not on_bed.any()
     assert list(d.storeys) == pytest.approx([0.0])
+
+
+def _porch_house(depth: float = 1.5):
+    """``two_rooms`` on a large ground plane, its roof running ``depth`` metres past the south
+    wall (y = 0) over a porch: floor below and a ceiling above, but outdoors."""
+    parts = [p for p in two_rooms() if p.name != "ceiling"]
+    parts.append(quad("roof", [[-0.5, -depth, H], [-0.5, 4.5, H], [9.5, 4.5, H], [9.5, -depth, H]]))
+    parts.append(quad("ground", [[-20, -20, -0.02], [30, -20, -0.02], [30, 25, -0.02], [-20, 25, -0.02]]))
+    return _room_scene(parts)
+
+
+def test_covered_porch_outside_the_walls_gets_no_camera_nor_tag(caplog):
+    """The strip under the eaves has floor and ceiling like a room, but half its eye-level
+    views leave the model: outdoors, left out and logged; ``start`` inside it keeps it."""
+    with caplog.at_level("INFO", logger="markerplace.plan.discretize"):
+        d = discretize(_porch_house(), DiscretizeConfig())
+    assert np.all(d.locations[:, 1] > 0) and len(d.locations) > 50
+    assert np.all(d.candidate_position[:, 1] > 0)  # no tag on the outside of the south wall
+    assert any("is outdoors" in r.getMessage() for r in caplog.records)
+    kept = discretize(_porch_house(), DiscretizeConfig(start=(4.5, -0.8)))
+    assert (kept.locations[:, 1] < 0).sum() > 5
+    everything = discretize(_porch_house(), DiscretizeConfig(max_open_fraction=1.0))
+    assert (everything.locations[:, 1] < 0).sum() > 5 and (everything.locations[:, 1] > 0).sum() > 50
+
+
+def test_room_with_wide_glassless_windows_stays_planned():
+    """A scan drops glass: 1.2 m holes (0.6-2.2 m high) in both long walls of room a let a few
+    eye-level views out, far fewer than a porch; the room keeps its cameras."""
+    parts = [p for p in two_rooms() if p.name not in ("wall0", "wall1")]
+    for i, y in enumerate((0.0, 4.0)):
+        for x0, x1 in ((0.0, 0.8), (2.0, 2.8), (4.0, 9.0 + T / 2)):  # solid between and after the windows
+            parts.append(box(f"w{i}_{x0}", (x0 - T / 2, y - T / 2, 0), (x1, y + T / 2, H)))
+        for x0, x1 in ((0.8, 2.0), (2.8, 4.0)):
+            parts += [box(f"sill{i}_{x0}", (x0, y - T / 2, 0), (x1, y + T / 2, 0.6)),
+                      box(f"head{i}_{x0}", (x0, y - T / 2, 2.2), (x1, y + T / 2, H))]
+    d = discretize(_room_scene(parts), DiscretizeConfig())
+    room_a = _in(d.locations, (0, 0, 5, 4))
+    assert room_a.sum() > 20 and (~room_a).sum() > 20

@@ -72,7 +72,9 @@ def plan_config_from_args(args: argparse.Namespace):
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
-                   marker_spacing=args.marker_spacing)  # tag_size: derived from placement's by PlanConfig
+                   marker_spacing=args.marker_spacing,
+                   max_open_fraction=1.0 if args.keep_outdoors else DiscretizeConfig().max_open_fraction)
+    # tag_size: derived from placement's by PlanConfig
     placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
                                 marker_model=args.marker_model, tag_size=args.tag_size,
                                 similarity=not args.no_similarity, seed=args.placement_seed,
@@ -104,6 +106,10 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--start", default=None, help="X,Y: plan only the free region holding this point (default: every region of at least 2 m^2)")
     g.add_argument("--grid-spacing", type=float, default=0.5, help="camera grid spacing, metres (default 0.5)")
     g.add_argument("--clearance", type=float, default=0.3, help="minimum distance of camera locations from obstacles, metres (default 0.3)")
+    g.add_argument("--keep-outdoors", action="store_true",
+                   help="also plan free regions open to the outside (a porch, a strip under the eaves, a balcony; "
+                        "or a room whose glass walls the scan lost): by default a region from which more than 35 %% "
+                        "of eye-level views hit nothing is left out, and logged")
     g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")
     g.add_argument("--marker-spacing", type=float, default=1.0, help="minimum spacing of candidate marker poses on a wall, metres (default 1.0)")
     g = p.add_argument_group("scoring and placement")

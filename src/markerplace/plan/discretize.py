@@ -38,7 +38,7 @@ from ..errors import UserError
 from ..scene.raycast import RayCaster
 from .discretization import Discretization
 from .floorplan import eye_level_support, storey_floor
-from .freespace import Sections, camera_locations, free_space, obstacle_mask
+from .freespace import Sections, StoreySpace, camera_locations, free_space, obstacle_mask, open_fractions
 from .grid import Grid
 from .storeys import FloorConfig, cast_columns, find_storeys
 from .wall_candidates import CandidateConfig, wall_candidates
@@ -76,6 +76,11 @@ class DiscretizeConfig:
             cross-sections whose union blocks free space.
         passage_radius: gaps narrower than twice this (metres) do not connect free space.
         min_region_area: without ``start``, free regions smaller than this (m^2) are dropped.
+        max_open_fraction: without ``start``, a free region from which more than this fraction
+            of horizontal eye-level rays hit nothing within ``open_reach`` is outdoors (a strip
+            under the eaves, a porch, a balcony: a CAD model's surroundings) and dropped; a room
+            with glassless windows lets far fewer out. 1.0 keeps every region.
+        open_reach: length of those rays, metres.
         floor: how storeys and floors are found (:class:`~markerplace.plan.storeys.FloorConfig`).
     """
 
@@ -97,6 +102,8 @@ class DiscretizeConfig:
     slice_offsets: tuple[float, ...] = (-0.3, 0.0, 0.25)
     passage_radius: float = 0.2
     min_region_area: float = 2.0
+    max_open_fraction: float = 0.35
+    open_reach: float = 50.0
     floor: FloorConfig = field(default_factory=FloorConfig)
 
     def candidate_config(self) -> CandidateConfig:
@@ -189,6 +196,8 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
             here = start
         space = free_space(grid, support, obstacle, passage_radius=cfg.passage_radius,
                            min_region_area=cfg.min_region_area, start=here)
+        if here is None:
+            space = _drop_outdoors(rc, grid, space, s, floor.floor_z + cfg.height, cfg)
         xy, z = camera_locations(grid, floor, space.free, grid_spacing=cfg.grid_spacing,
                                  clearance=cfg.clearance, height=cfg.height, rc=rc)
         spaces.append((s, floor, support & ~obstacle, space, xy, z))
@@ -240,6 +249,30 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
         occupancy=np.stack([t[3].occupancy for t in spaces]), planned_storeys=np.asarray(slots, np.int64),
         grid_origin=np.array([grid.x0, grid.y0]), grid_resolution=float(grid.res),
         storeys=np.asarray(storeys, dtype=float), start=np.asarray(start, dtype=float), summary=summary)
+
+
+def _drop_outdoors(rc: RayCaster, grid: Grid, space: StoreySpace, s: int, eye: float,
+                   cfg: DiscretizeConfig) -> StoreySpace:
+    """``space`` without its regions open to the outside (``max_open_fraction``), logged."""
+    lab, frac, area = open_fractions(rc, grid, space.free, eye, reach=cfg.open_reach)
+    drop = np.flatnonzero(frac > cfg.max_open_fraction)
+    drop = drop[drop > 0]
+    for i in range(1, len(frac)):
+        log.debug("discretize: storey %d: free region %d, %.1f m^2: %.0f %% of eye-level rays leave the model",
+                  s, i, area[i], 100 * frac[i])
+    if len(drop) == 0:
+        return space
+    for i in drop:
+        rr, cc = np.nonzero(lab == i)
+        centre = grid.centres(np.array([rr.mean()]), np.array([cc.mean()]))[0]
+        log.info("discretize: storey %d: a free region of %.1f m^2 around (%.1f, %.1f) is outdoors (%.0f %% of its "
+                 "eye-level views hit nothing within %.0f m: under eaves, a porch, a balcony); no cameras there "
+                 "(--keep-outdoors, or --start X,Y inside it, keeps it)", s, area[i], centre[0], centre[1], 100 * frac[i], cfg.open_reach)
+    out = np.isin(lab, drop)
+    free = space.free & ~out
+    occupancy = space.occupancy.copy()
+    occupancy[out] = -1
+    return StoreySpace(free, occupancy, space.unreached, float(free.sum() * grid.res ** 2))
 
 
 def _check_start(start: np.ndarray, grid: Grid, per_storey: list, cfg: DiscretizeConfig) -> None:
