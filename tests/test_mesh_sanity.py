@@ -203,6 +203,23 @@ def test_up_axis_scores_prefer_z_on_builtins(name):
     assert all(scores[k][0] < 0.5 * scores["+z"][0] for k in ("+x", "-x", "+y", "-y"))
 
 
+def test_up_axis_is_told_by_the_floors_not_by_a_pit_below_them():
+    """A multi-level model's lowest vertex is often a pit, a shaft or a stairwell's bottom (a
+    third-party game level: a 1 m^2 pit 5 m below the main floor). The floor the up axis is
+    judged by is the lowest one covering 10 % of the footprint, so +z still wins clearly."""
+    from markerplace.scene.sanity import up_axis_scores
+
+    V, F = (np.asarray(a) for a in load_scene("tiny").geometry())
+    x0, y0 = V[:, 0].min() + 1.0, V[:, 1].min() + 1.0
+    pit = np.array([[x0, y0, -5.0], [x0 + 1, y0, -5.0], [x0 + 1, y0 + 1, -5.0], [x0, y0 + 1, -5.0]])
+    V2 = np.vstack([V, pit])
+    F2 = np.vstack([F, len(V) + np.array([[0, 1, 2], [0, 2, 3]])])  # its bottom faces up
+    scores = up_axis_scores(V2, F2)
+    assert max(scores, key=lambda k: scores[k][0]) == "+z"
+    assert scores["+z"][0] == pytest.approx(up_axis_scores(V, F)["+z"][0], rel=0.05)
+    assert all(scores[k][0] < 0.5 * scores["+z"][0] for k in ("+x", "-x", "+y", "-y"))
+
+
 # --- item 5: --existing off the walls ----------------------------------------------------------------
 
 @pytest.mark.parametrize("marker, message", [

@@ -122,6 +122,8 @@ FLOOR_BAND_M = 0.3
 """A floor lies within this of the model's bottom along the up axis."""
 FURNITURE_BAND_M = (0.3, 1.3)
 """Seats, tables and counters face up this far above the bottom."""
+BOTTOM_SHARE = 0.1
+"""The bottom is the lowest height facing up over this share of the footprint (in a floor band)."""
 HORIZONTAL_COS = 0.95
 
 
@@ -129,7 +131,10 @@ def up_axis_scores(vertices: np.ndarray, faces: np.ndarray) -> dict[str, tuple[f
     """How much each signed world axis looks like "up", from the geometry alone.
 
     For a candidate up axis a, with faces "facing up" when n.a > 0.95 and "facing down" when
-    n.a < -0.95 (n the unit face normal) and heights h = centroid.a above the lowest vertex:
+    n.a < -0.95 (n the unit face normal) and heights h = centroid.a above the bottom, the lowest
+    height with up-facing area of at least 10 % of the footprint within 0.3 m above it (not the
+    lowest vertex: in a multi-level model that is a pit's or a stairwell's bottom, the floors lie
+    above it):
 
         score(a) = area facing up with h < 0.3 m (floor)  -  area facing down there
                    + area facing up with 0.3 <= h <= 1.3 m (furniture tops)
@@ -159,15 +164,27 @@ def up_axis_scores(vertices: np.ndarray, faces: np.ndarray) -> dict[str, tuple[f
     for name, axis in SIGNED_AXES.items():
         a = np.asarray(axis)
         d = n @ a
-        h = centroid @ a - float((v @ a).min())
         up, down = d > HORIZONTAL_COS, d < -HORIZONTAL_COS
-        floor = h < FLOOR_BAND_M
-        furniture = (h >= FURNITURE_BAND_M[0]) & (h <= FURNITURE_BAND_M[1])
-        score = area[up & floor].sum() - area[down & floor].sum() + area[up & furniture].sum()
         i = int(np.argmax(np.abs(a)))
         footprint = float(np.prod(np.delete(extent, i)))
+        h = centroid @ a - _bottom(centroid[up] @ a, area[up], float((v @ a).min()), BOTTOM_SHARE * footprint)
+        floor = (h > -1e-6) & (h < FLOOR_BAND_M)
+        furniture = (h >= FURNITURE_BAND_M[0]) & (h <= FURNITURE_BAND_M[1])
+        score = area[up & floor].sum() - area[down & floor].sum() + area[up & furniture].sum()
         out[name] = (float(score), footprint)
     return out
+
+
+def _bottom(heights: np.ndarray, areas: np.ndarray, lowest: float, min_area: float) -> float:
+    """``lowest`` (the lowest vertex, metres along the axis) when the floor band above it holds
+    ``min_area`` m^2 of the up-facing ``areas`` at ``heights``, else the lowest face height whose
+    band does (else ``lowest``)."""
+    order = np.argsort(heights)
+    h, a = np.concatenate([[lowest], heights[order]]), np.concatenate([[0.0], areas[order]])
+    cum = np.cumsum(a)
+    ends = np.searchsorted(h, h + FLOOR_BAND_M, side="left") - 1  # last index in [h_i, h_i + band)
+    ok = np.flatnonzero(cum[ends] - cum + a >= min_area)
+    return float(h[ok[0]]) - 1e-6 if len(ok) else lowest
 
 
 def check_up_axis(scene, world_from_file_rotation: np.ndarray, up_choices: dict[str, np.ndarray], path: Path,
