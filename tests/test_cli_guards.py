@@ -225,6 +225,29 @@ def test_size_guard_refuses_a_run_that_would_not_fit(tmp_path, capsys, monkeypat
     assert not (tmp_path / "o").exists()  # a refused run leaves nothing behind
 
 
+def test_size_guard_counts_the_poses_when_the_bounding_box_overstates_them(tmp_path, caplog, monkeypatch):
+    """A small room beside a tall, far mast (a multi-level game level, an antenna, a stray
+    vertex): the bounding-box bound is over the limits (by less than ten times), the
+    discretized count is not, so the run goes on; the log gives both."""
+    import logging
+
+    import trimesh
+
+    from markerplace.scene import load_scene
+
+    V, F = (np.asarray(a) for a in load_scene("tiny").geometry())
+    mast = trimesh.creation.box(extents=(0.2, 0.2, 12.0))
+    mast.apply_translation((40.0, 40.0, 6.0))
+    path = tmp_path / "tiny_and_mast.obj"
+    trimesh.Trimesh(np.vstack([V, mast.vertices]), np.vstack([F, len(V) + mast.faces]), process=False).export(str(path))
+    monkeypatch.setattr(size_guard, "machine_memory_bytes", lambda: 24 * 2**30)  # the bound: 164 GB, 9 x over
+    with caplog.at_level(logging.INFO):
+        assert main(["plan", str(path), "-k", "1", "--out", str(tmp_path / "o"), "--grid-spacing", "0.5",
+                     "--yaws", "8", "--workers", "1"]) == 0
+    text = caplog.text
+    assert "by the bounding box; counting the camera poses" in text and "(discretized)" in text
+
+
 def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
     import json
 

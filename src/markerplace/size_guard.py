@@ -1,11 +1,15 @@
 """The run-size guard: estimate a ``plan``/``evaluate`` run before it starts and refuse one too
 large for this machine unless ``--force``.
 
-:func:`estimate_run` estimates the camera poses (an upper bound from the model's footprint),
-the peak memory (bytes) and the wall-clock time (seconds) of a run from the costs measured on
-the reference machine (README, Benchmarks; the module constants); :func:`check_run_size`
-refuses, with the numbers and the ``--force`` flag, a run over :class:`SizeLimits`
-(:class:`~markerplace.errors.UserError`, one line, exit code 2).
+:func:`estimate_run` estimates the camera poses (an upper bound from the model's footprint,
+or the exact count of a discretization), the peak memory (bytes) and the wall-clock time
+(seconds) of a run from the costs measured on the reference machine (README, Benchmarks; the
+module constants); :func:`check_run_size` refuses, with the numbers and the ``--force`` flag, a
+run over :class:`SizeLimits` (:class:`~markerplace.errors.UserError`, one line, exit code 2).
+The bound is loose for multi-level models whose storeys cover little of the bounding box (a
+game level: 17 times the real count), so a run over the limits by the bound is checked again
+with the discretization's exact count (:func:`over_limits` tells when; discretizing takes
+seconds) before it is refused, unless it is over by more than :data:`RECOUNT_FACTOR`.
 """
 
 from __future__ import annotations
@@ -39,6 +43,9 @@ SECONDS_PER_QUERY_CORE = 0.1
 
 STOREY_HEIGHT_M = 3.5
 """Height per storey when guessing how many storeys ``--level all`` plans."""
+RECOUNT_FACTOR = 10.0
+"""A bound over the limits by less than this is checked again with the exact pose count; one
+further over is refused at once (wrong units, an absurd grid: discretizing it would be slow)."""
 LARGE_FOOTPRINT_M2 = 10_000.0
 """A refused run over this footprint also suggests ``--unit-scale`` (a model in cm looks 10^4 x larger)."""
 
@@ -70,6 +77,8 @@ class RunEstimate:
         seconds: wall-clock time on ``workers`` processes.
         workers: rendering processes.
         queries: localized test images (``evaluate``; 0 for ``plan``).
+        storeys: storeys the bound assumes.
+        exact: ``poses`` is a discretization's count, not the bound.
     """
 
     footprint_m2: float
@@ -79,10 +88,12 @@ class RunEstimate:
     workers: int
     queries: int = 0
     storeys: int = 1
+    exact: bool = False
 
     def describe(self) -> str:
         where = f"{self.footprint_m2:.0f} m^2 footprint" + (f" x {self.storeys} storeys" if self.storeys > 1 else "")
-        text = (f"up to about {self.poses:,} camera poses ({where}), "
+        poses = f"{self.poses:,} camera poses (discretized)" if self.exact else f"up to about {self.poses:,} camera poses ({where})"
+        text = (f"{poses}, "
                 f"{_gib(self.memory_bytes)} of memory and {format_duration(self.seconds)} on {self.workers} worker(s)")
         if self.queries:
             text += f" including {self.queries:,} test-image localizations"
@@ -109,7 +120,8 @@ def machine_memory_bytes() -> float:
     return total
 
 
-def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0) -> RunEstimate:
+def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0,
+                 poses: int | None = None) -> RunEstimate:
     """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
 
     Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
@@ -118,7 +130,8 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     walls and furniture take space.
     Memory and time use the per-pose costs measured on the reference machine (module
     constants). ``evaluate`` adds a map re-render per placement with markers and one
-    localization per test image, test set and placement.
+    localization per test image, test set and placement. ``poses``: the exact count (from a
+    discretization) instead of the bound.
     """
     from .runtime.workers import default_workers
 
@@ -129,7 +142,8 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     footprint = w * h
     locations = (math.floor(w / d.grid_spacing) + 1) * (math.floor(h / d.grid_spacing) + 1) if footprint > 0 else 1
     storeys = 1 if d.level is not None else max(1, math.ceil((float(hi[2] - lo[2]) - 0.5) / STOREY_HEIGHT_M))
-    poses = int(locations * d.num_yaws * storeys)
+    exact = poses is not None
+    poses = int(poses) if exact else int(locations * d.num_yaws * storeys)
     workers = default_workers(plan_config.runtime.workers)
     cells = (float(hi[0] - lo[0]) / OCCUPANCY_CELL + 20) * (float(hi[1] - lo[1]) / OCCUPANCY_CELL + 20)
     memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
@@ -143,7 +157,23 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
         queries = evaluate_config.test.tests * len(evaluate_config.test.sets) * placements
         core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
             + evaluate_config.test.tests * len(evaluate_config.test.sets) * SECONDS_PER_POSE_CORE
-    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys)
+    return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys, exact)
+
+
+def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
+                memory_bytes: float | None = None, factor: float = 1.0) -> list[str]:
+    """Why ``estimate`` is over ``factor`` times ``limits`` (empty when it is not), e.g. "longer
+    than 12 h"."""
+    total = machine_memory_bytes() if memory_bytes is None else memory_bytes
+    limits = SizeLimits(int(limits.max_poses * factor), limits.max_hours * factor, limits.memory_fraction * factor)
+    reasons = []
+    if estimate.poses > limits.max_poses:
+        reasons.append(f"more than {limits.max_poses:,} poses")
+    if estimate.memory_bytes > limits.memory_fraction * total:
+        reasons.append(f"more memory than this machine has ({_gib(total)})")
+    if estimate.seconds > limits.max_hours * 3600:
+        reasons.append(f"longer than {limits.max_hours:g} h")
+    return reasons
 
 
 def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
@@ -154,14 +184,7 @@ def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimit
         UserError: estimated poses over ``max_poses``, time over ``max_hours`` or memory over
             ``memory_fraction`` of ``memory_bytes`` (default: :func:`machine_memory_bytes`).
     """
-    total = machine_memory_bytes() if memory_bytes is None else memory_bytes
-    reasons = []
-    if estimate.poses > limits.max_poses:
-        reasons.append(f"more than {limits.max_poses:,} poses")
-    if estimate.memory_bytes > limits.memory_fraction * total:
-        reasons.append(f"more memory than this machine has ({_gib(total)})")
-    if estimate.seconds > limits.max_hours * 3600:
-        reasons.append(f"longer than {limits.max_hours:g} h")
+    reasons = over_limits(estimate, limits, memory_bytes)
     if not reasons:
         log.info("run size: %s", estimate.describe())
         return

@@ -11,7 +11,10 @@ Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` 
 from __future__ import annotations
 
 import argparse
+import logging
 from typing import Sequence
+
+log = logging.getLogger(__name__)
 
 __all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
            "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
@@ -38,14 +41,22 @@ def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None,
     (:func:`markerplace.size_guard.check_run_size`; ``force`` = ``--force``)."""
     from dataclasses import replace
 
-    from ..size_guard import check_run_size, estimate_run
+    from ..size_guard import RECOUNT_FACTOR, check_run_size, estimate_run, over_limits
     from ..scene.worldframe import points_to_internal, world_offset
 
     offset = world_offset(scene)
     if config.discretize.start is not None and offset.any():
         start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
         config = replace(config, discretize=replace(config.discretize, start=start))
-    check_run_size(estimate_run(scene, config, evaluate_config, extra_placements), force=force)
+    estimate = estimate_run(scene, config, evaluate_config, extra_placements)
+    if over_limits(estimate) and not over_limits(estimate, factor=RECOUNT_FACTOR) and not force:
+        # the bound is loose (multi-level models): count the poses (seconds)
+        from ..plan.discretize import discretize
+
+        log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
+        poses = len(discretize(scene, config.discretize).world_from_cam)
+        estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
+    check_run_size(estimate, force=force)
     return config
 
 
