@@ -7,7 +7,7 @@ or the exact count of a discretization), the peak memory (bytes) and the wall-cl
 module constants); :func:`check_run_size` refuses, with the numbers and the ``--force`` flag, a
 run over :class:`SizeLimits` (:class:`~markerplace.errors.UserError`, one line, exit code 2).
 The bound is loose for multi-level models whose storeys cover little of the bounding box (a
-game level: 17 times the real count), so a run over the limits by the bound is checked again
+game level with a deep pit), so a run over the limits by the bound is checked again
 with the discretization's exact count (:func:`over_limits` tells when; discretizing takes
 seconds) before it is refused, unless it is over by more than :data:`RECOUNT_FACTOR`.
 """
