@@ -115,15 +115,24 @@ def test_unit_scale(tmp_path):
 
 
 def test_untextured_mesh_is_grey_with_warning(tmp_path, caplog, monkeypatch):
+    """Warned once: the size guard, each stage and every worker load the scene again."""
+    from markerplace.scene import sanity
+
     monkeypatch.setattr(logging.getLogger("markerplace"), "propagate", True)
+    monkeypatch.setattr(sanity, "_WARNED", set())  # another test's load must not have used it up
     path = tmp_path / "plain.obj"
     _box([3.0, 3.0, 2.5], [0.0, 0.0, 1.25]).export(path)
+    def grey():
+        return [r for r in caplog.records if "grey" in r.getMessage() and r.levelno == logging.WARNING]
+
     with caplog.at_level(logging.WARNING, logger="markerplace.scene.loader"):
         scene = load_scene(str(path))
+        first = len(grey())
+        load_scene(str(path))
     part = scene.parts[0]
     assert part.texture is None and part.colors is None
     assert part.base_color == (0.7, 0.7, 0.7, 1.0)
-    assert any("grey" in r.getMessage() and r.levelno == logging.WARNING for r in caplog.records)
+    assert first >= 1 and len(grey()) == first  # the second load adds no warning
 
 
 def test_missing_file(tmp_path):

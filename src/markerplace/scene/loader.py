@@ -190,14 +190,14 @@ def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str, gl
             )
         )
     if untextured:
-        log.warning(
+        sanity.warn_once(
             "%d of %d mesh parts have no texture, vertex colours or material colour; they are drawn "
             "in plain grey and will give few image features",
             untextured,
             len(parts),
         )
     if parts and all(p.texture is None and p.colors is None for p in parts):
-        log.warning("the model has no textures or vertex colours: expect few image features")
+        sanity.warn_once("the model has no textures or vertex colours: expect few image features")
     return parts
 
 

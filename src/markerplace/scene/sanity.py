@@ -29,7 +29,7 @@ log = logging.getLogger("markerplace.scene.loader")
 _WARNED: set[str] = set()
 
 
-def _warn_once(message: str, *args) -> None:
+def warn_once(message: str, *args) -> None:
     """Log a warning once per process, and only in the main process: the scene is loaded again
     by each stage and in every rendering worker, and the user needs to read it once."""
     import multiprocessing
@@ -101,7 +101,7 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
         done.add(key)
         if len(mesh.faces) > 0 and np.all(np.isfinite(world_from_file @ file_from_mesh)):
             out.append((name, mesh, file_from_mesh))
-    _warn_once("%s: dropped %d of %d vertices with NaN or infinite coordinates and the %d faces using them",
+    warn_once("%s: dropped %d of %d vertices with NaN or infinite coordinates and the %d faces using them",
                 path, bad, total, dropped_faces)
     return out
 
@@ -209,7 +209,7 @@ def check_up_axis(scene, world_from_file_rotation: np.ndarray, up_choices: dict[
     suggestion = next((k for k, R in up_choices.items() if np.allclose(R @ file_axis, (0, 0, 1), atol=1e-6)), None)
     if suggestion is None:
         return None
-    _warn_once("%s: read with --up %s, but its floor seems to face another way: %.0f m^2 of floor and furniture "
+    warn_once("%s: read with --up %s, but its floor seems to face another way: %.0f m^2 of floor and furniture "
                 "face up with --up %s against %.0f m^2 as read; if the plan looks wrong, pass --up %s",
                 path, up_read, best_score, suggestion, max(current, 0.0), suggestion)
     return suggestion
@@ -263,6 +263,6 @@ def warn_missing_textures(path: Path) -> list[str]:
     missing = missing_textures(path)
     if missing:
         shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-        _warn_once("%s: texture file(s) not found next to it: %s; the parts using them are drawn without texture",
+        warn_once("%s: texture file(s) not found next to it: %s; the parts using them are drawn without texture",
                     path, shown)
     return missing
