@@ -205,3 +205,47 @@ def test_unknown_calibration_poses_is_a_one_line_error(tmp_path, capsys):
         main(["plan", "tiny", "--method", "expected-recall", "--calibration-poses", "test", "--out", str(tmp_path)])
     assert e.value.code == 2
     assert "--calibration-poses" in capsys.readouterr().err
+
+
+def _ceiling_holdout():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "ceiling_holdout.py"
+    spec = importlib.util.spec_from_file_location("ceiling_holdout", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_ceiling_holdout_tells_selection_on_the_test_images_from_a_real_gain():
+    bench = _ceiling_holdout()
+    rng = np.random.default_rng(0)
+    Q, C = 400, 120
+    base = np.zeros(Q, bool)
+    noise = rng.random((C, Q)) < 0.03  # every candidate fixes a few images at random: nothing generalizes
+    i, h, r = bench.holdout_gains(base, noise, 5, 0.5, 20, 50, np.random.default_rng(1))
+    assert i - r > 0.04          # picked on the scored images: looks well above random
+    assert abs(h - r) < 0.01     # picked on the other images: no better than random
+    real = noise.copy()
+    real[7] = True               # one candidate fixes every image
+    i, h, r = bench.holdout_gains(base, real, 1, 0.5, 20, 50, np.random.default_rng(1))
+    assert i == h == 1.0 and r < 0.1
+
+
+def test_ceiling_holdout_reads_the_evaluations_single_tag_runs(evaluation):
+    import contextlib
+    import io
+
+    bench = _ceiling_holdout()
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        bench.main([str(evaluation), "--test-set", "weighted", "--k", "2,3", "--splits", "4", "--draws", "5"])
+    got = dict(line.split(": ", 1) for line in buf.getvalue().splitlines())
+    assert int(got["test_images"]) == 12
+    assert int(got["fixable_by_one_candidate"]) <= int(got["failing_without_markers"])
+    md = (evaluation / "ceiling.md").read_text().split("## uniform")[0]
+    est = next(line for line in md.splitlines() if line.startswith("| ceiling (single-tag estimate) |"))
+    # the same greedy picks from the same cached predictions as the evaluation's ceiling
+    assert [float(v) for v in est.strip("|").split("|")[1:]] == \
+        [float(got["k2_all_images_ceiling_estimate"]), float(got["k3_all_images_ceiling_estimate"])]

@@ -1,0 +1,143 @@
+"""How much of the oracle ceiling is chosen on the test images themselves? (held-out ceiling)
+
+The oracle ceiling (``evaluate --ceiling``, :mod:`markerplace.testbed.ceiling`) picks its k
+candidates greedily on the same test images it is scored on, so part of its lead over random
+is selection on those images (a candidate that happens to fix 12 of them is picked because
+it did). This splits the test images in halves at random: the greedy picks made on one half
+are scored on the other (held out) and set against the picks made on that half itself (in
+sample, as the ceiling is) and against random k-subsets of candidates, all in the ceiling's
+single-tag estimate (an image counts as localized when no markers or one pick alone localize
+it). ``--train-fraction`` sets the share of the images the held-out picks are made on (the
+rest are scored); a held-out gain that grows with it says more images would find better picks. The gap between the in-sample and the held-out figure is the part of the ceiling that no
+method planned without the test images could reach, whatever its objective.
+
+Reads the ``single`` and ``none`` predictions cached by an ``evaluate --ceiling`` run and
+prints ``name: value`` lines (recall points over no markers of the scored part; means over
+the splits; ``all_images_ceiling_over_random``: the ceiling's own single-tag estimate, picks
+made and scored on every image, over random subsets):
+
+    .venv/bin/python benchmarks/ceiling_holdout.py out/eval_apartment --test-set weighted --k 10,20
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from markerplace.testbed.ceiling import SINGLE, oracle_order
+from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.testbed.placements import NO_MARKERS
+from markerplace.testbed.predictions import load_prediction
+
+log = logging.getLogger(__name__)
+
+
+def single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:
+    """(Q,) bool localized without markers and (C, Q) bool localized with candidate c alone,
+    from the predictions cached in ``run_dir/cache/predictions`` (main threshold)."""
+    truth = np.load(run_dir / f"test_poses_{test_set}.npz")["world_from_cam"]
+    folder = run_dir / "cache" / "predictions"
+    found: dict[tuple[str, int], np.ndarray] = {}
+    for meta_path in sorted(folder.glob("*.meta.json")):
+        meta = json.loads(meta_path.read_text())
+        if meta.get("test_set") != test_set or meta.get("method") not in (SINGLE, NO_MARKERS):
+            continue
+        key = (meta["method"], int(meta["run"]))
+        if key in found:
+            raise SystemExit(f"{run_dir}: two cached predictions for {key} on {test_set}; "
+                             "run this on a folder holding one evaluation's cache")
+        est = load_prediction(folder, meta["key"])
+        if est is None or len(est) != len(truth):
+            raise SystemExit(f"{run_dir}: cached prediction {meta['key']} does not belong to the folder's "
+                             f"{len(truth)} {test_set} test images (another test seed?); use the ceiling run's own folder")
+        found[key] = hit_mask(*pose_errors_batch(est, truth), *MAIN_THRESHOLD)
+    if (NO_MARKERS, 0) not in found:
+        raise SystemExit(f"{run_dir}: no marker-free predictions for {test_set}; run `evaluate --ceiling` first")
+    runs = sorted(r for m, r in found if m == SINGLE)
+    if not runs or runs != list(range(len(runs))):
+        raise SystemExit(f"{run_dir}: single-tag predictions for {test_set} are missing or incomplete "
+                         f"({len(runs)} found); run `evaluate --ceiling` to the end first")
+    return found[(NO_MARKERS, 0)], np.stack([found[(SINGLE, c)] for c in runs])
+
+
+def covered(base: np.ndarray, hits: np.ndarray, picks) -> int:
+    """Images localized by no markers or one of ``picks`` alone."""
+    return int((base | hits[list(picks)].any(axis=0)).sum()) if len(picks) else int(base.sum())
+
+
+def holdout_gains(base: np.ndarray, hits: np.ndarray, k: int, train_fraction: float, splits: int,
+                  draws: int, rng: np.random.Generator) -> tuple[float, float, float]:
+    """Mean gains over no markers (share of the scored images) of greedy picks made on the scored
+    images themselves (in sample), of greedy picks made on the other images (held out), and of
+    random k-subsets of candidates, over ``splits`` random splits.
+
+    Args:
+        base: (Q,) bool, localized without markers.
+        hits: (C, Q) bool, localized with candidate c alone.
+        k: picks, at most C.
+        train_fraction: share of the Q images the held-out picks are made on.
+        splits, draws: random splits; random k-subsets per split.
+    """
+    C, Q = hits.shape
+    k = min(int(k), C)
+    in_sample, held_out, random_gain = [], [], []
+    for _ in range(splits):
+        a = np.zeros(Q, bool)
+        a[rng.permutation(Q)[: int(round(train_fraction * Q))]] = True
+        b = ~a
+        nb, base_b = b.sum(), covered(base[b], hits[:, b], [])
+        picks_a, _ = oracle_order(base[a], hits[:, a], k)
+        picks_b, _ = oracle_order(base[b], hits[:, b], k)
+        in_sample.append((covered(base[b], hits[:, b], picks_b) - base_b) / nb)
+        held_out.append((covered(base[b], hits[:, b], picks_a) - base_b) / nb)
+        random_gain.append(np.mean([covered(base[b], hits[:, b], rng.choice(C, k, replace=False)) - base_b
+                                    for _ in range(draws)]) / nb)
+    return float(np.mean(in_sample)), float(np.mean(held_out)), float(np.mean(random_gain))
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", type=Path, help="output folder of `markerplace evaluate --ceiling`")
+    ap.add_argument("--test-set", default="weighted")
+    ap.add_argument("--k", default="10,20", help="marker budgets, comma-separated")
+    ap.add_argument("--splits", type=int, default=50, help="random half splits of the test images")
+    ap.add_argument("--draws", type=int, default=200, help="random k-subsets of candidates per split")
+    ap.add_argument("--train-fraction", type=float, default=0.5,
+                    help="share of the test images the held-out picks are made on (0.5: halves)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    if not 0.0 < args.train_fraction < 1.0:
+        raise SystemExit("--train-fraction must be between 0 and 1 (exclusive), e.g. 0.5")
+    base, hits = single_tag_hits(args.run_dir, args.test_set)
+    C, Q = hits.shape
+    fix = hits & ~base[None, :]
+    print(f"test_images: {Q}")
+    print(f"train_fraction: {args.train_fraction:g}")
+    print(f"candidates: {C}")
+    print(f"failing_without_markers: {int((~base).sum())}")
+    print(f"fixable_by_one_candidate: {int(fix.any(axis=0).sum())}")
+    print(f"fixes_per_candidate_median: {float(np.median(fix.sum(axis=1))):.1f}")
+    print(f"fixes_per_candidate_max: {int(fix.sum(axis=1).max())}")
+    rng = np.random.default_rng(args.seed)
+    for k in (min(int(v), C) for v in args.k.split(",")):
+        i, h, r = (100 * x for x in holdout_gains(base, hits, k, args.train_fraction, args.splits, args.draws, rng))
+        full, _ = oracle_order(base, hits, k)
+        full_gain = 100 * (covered(base, hits, full) - base.sum()) / Q
+        full_random = 100 * np.mean([covered(base, hits, rng.choice(C, k, replace=False)) - base.sum()
+                                     for _ in range(args.draws)]) / Q
+        print(f"k{k}_all_images_ceiling_estimate: {100 * base.mean() + full_gain:.1f}")
+        print(f"k{k}_all_images_ceiling_over_random: {full_gain - full_random:.1f}")
+        print(f"k{k}_in_sample_gain: {i:.1f}")
+        print(f"k{k}_held_out_gain: {h:.1f}")
+        print(f"k{k}_random_gain: {r:.1f}")
+        print(f"k{k}_in_sample_over_random: {i - r:.1f}")
+        print(f"k{k}_held_out_over_random: {h - r:.1f}")
+        print(f"k{k}_held_out_share_of_in_sample: {(h - r) / (i - r) if i > r else float('nan'):.2f}")
+
+
+if __name__ == "__main__":
+    main()
