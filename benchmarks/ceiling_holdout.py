@@ -9,7 +9,9 @@ sample, as the ceiling is) and against random k-subsets of candidates, all in th
 single-tag estimate (an image counts as localized when no markers or one pick alone localize
 it). ``--train-fraction`` sets the share of the images the held-out picks are made on (the
 rest are scored); a held-out gain that grows with it says more images would find better picks. The gap between the in-sample and the held-out figure is the part of the ceiling that no
-method planned without the test images could reach, whatever its objective.
+method planned without the test images could reach, whatever its objective. The computation is
+:func:`markerplace.testbed.ceiling.held_out_gains` (``ceiling.md`` carries it with half splits);
+this script reads an existing run's cache and varies the splits.
 
 Reads the ``single`` and ``none`` predictions cached by an ``evaluate --ceiling`` run and
 prints ``name: value`` lines (recall points over no markers of the scored part; means over
@@ -28,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.testbed.ceiling import SINGLE, oracle_order
+from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 from markerplace.testbed.placements import NO_MARKERS
 from markerplace.testbed.predictions import load_prediction
@@ -64,41 +66,6 @@ def single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarra
     return found[(NO_MARKERS, 0)], np.stack([found[(SINGLE, c)] for c in runs])
 
 
-def covered(base: np.ndarray, hits: np.ndarray, picks) -> int:
-    """Images localized by no markers or one of ``picks`` alone."""
-    return int((base | hits[list(picks)].any(axis=0)).sum()) if len(picks) else int(base.sum())
-
-
-def holdout_gains(base: np.ndarray, hits: np.ndarray, k: int, train_fraction: float, splits: int,
-                  draws: int, rng: np.random.Generator) -> tuple[float, float, float]:
-    """Mean gains over no markers (share of the scored images) of greedy picks made on the scored
-    images themselves (in sample), of greedy picks made on the other images (held out), and of
-    random k-subsets of candidates, over ``splits`` random splits.
-
-    Args:
-        base: (Q,) bool, localized without markers.
-        hits: (C, Q) bool, localized with candidate c alone.
-        k: picks, at most C.
-        train_fraction: share of the Q images the held-out picks are made on.
-        splits, draws: random splits; random k-subsets per split.
-    """
-    C, Q = hits.shape
-    k = min(int(k), C)
-    in_sample, held_out, random_gain = [], [], []
-    for _ in range(splits):
-        a = np.zeros(Q, bool)
-        a[rng.permutation(Q)[: int(round(train_fraction * Q))]] = True
-        b = ~a
-        nb, base_b = b.sum(), covered(base[b], hits[:, b], [])
-        picks_a, _ = oracle_order(base[a], hits[:, a], k)
-        picks_b, _ = oracle_order(base[b], hits[:, b], k)
-        in_sample.append((covered(base[b], hits[:, b], picks_b) - base_b) / nb)
-        held_out.append((covered(base[b], hits[:, b], picks_a) - base_b) / nb)
-        random_gain.append(np.mean([covered(base[b], hits[:, b], rng.choice(C, k, replace=False)) - base_b
-                                    for _ in range(draws)]) / nb)
-    return float(np.mean(in_sample)), float(np.mean(held_out)), float(np.mean(random_gain))
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="output folder of `markerplace evaluate --ceiling`")
@@ -124,7 +91,7 @@ def main(argv=None) -> None:
     print(f"fixes_per_candidate_max: {int(fix.sum(axis=1).max())}")
     rng = np.random.default_rng(args.seed)
     for k in (min(int(v), C) for v in args.k.split(",")):
-        i, h, r = (100 * x for x in holdout_gains(base, hits, k, args.train_fraction, args.splits, args.draws, rng))
+        i, h, r = (100 * x for x in held_out_gains(base, hits, k, rng, args.train_fraction, args.splits, args.draws))
         full, _ = oracle_order(base, hits, k)
         full_gain = 100 * (covered(base, hits, full) - base.sum()) / Q
         full_random = 100 * np.mean([covered(base, hits, rng.choice(C, k, replace=False)) - base.sum()

@@ -108,8 +108,9 @@ class EvaluateConfig:
         localization: how test images are localized.
         diagnostics: the oracle ceiling and the score's calibration on map images.
         thresholds: recall thresholds (metres, degrees).
-        seed: seed of the localizer's RANSAC, of the VLAD codebook's k-means and, unless
-            ``test.seed`` is set, of the test poses and the shift signs.
+        seed: seed of the localizer's RANSAC, of the VLAD codebook's k-means, of the
+            held-out ceiling's random splits and, unless ``test.seed`` is set, of the test
+            poses and the shift signs.
     """
 
     test: TestSetConfig = field(default_factory=TestSetConfig)
