@@ -8,8 +8,9 @@ are scored on the other (held out) and set against the picks made on that half i
 sample, as the ceiling is) and against random k-subsets of candidates, all in the ceiling's
 single-tag estimate (an image counts as localized when no markers or one pick alone localize
 it). ``--train-fraction`` sets the share of the images the held-out picks are made on (the
-rest are scored); a held-out gain that grows with it says more images would find better picks. The gap between the in-sample and the held-out figure is the part of the ceiling that no
-method planned without the test images could reach, whatever its objective. The computation is
+rest are scored); a held-out gain that grows with it says more images would find better
+picks. The gap between the in-sample and the held-out figure is the part of the ceiling that
+no method planned without the test images could reach, whatever its objective. The computation is
 :func:`markerplace.testbed.ceiling.held_out_gains` (``ceiling.md`` carries it with half splits);
 this script reads an existing run's cache and varies the splits.
 
@@ -25,45 +26,41 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 from pathlib import Path
 
 import numpy as np
 
-from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order
-from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
 from markerplace.testbed.placements import NO_MARKERS
 from markerplace.testbed.predictions import load_prediction
 
-log = logging.getLogger(__name__)
 
-
-def single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:
+def cached_single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:
     """(Q,) bool localized without markers and (C, Q) bool localized with candidate c alone,
     from the predictions cached in ``run_dir/cache/predictions`` (main threshold)."""
     truth = np.load(run_dir / f"test_poses_{test_set}.npz")["world_from_cam"]
     folder = run_dir / "cache" / "predictions"
-    found: dict[tuple[str, int], np.ndarray] = {}
+    predictions: dict[tuple, np.ndarray] = {}
     for meta_path in sorted(folder.glob("*.meta.json")):
         meta = json.loads(meta_path.read_text())
         if meta.get("test_set") != test_set or meta.get("method") not in (SINGLE, NO_MARKERS):
             continue
-        key = (meta["method"], int(meta["run"]))
-        if key in found:
-            raise SystemExit(f"{run_dir}: two cached predictions for {key} on {test_set}; "
+        key = (meta["method"], int(meta["run"]), int(meta["k"]), test_set)
+        if key in predictions:
+            raise SystemExit(f"{run_dir}: two cached predictions for {key}; "
                              "run this on a folder holding one evaluation's cache")
         est = load_prediction(folder, meta["key"])
         if est is None or len(est) != len(truth):
             raise SystemExit(f"{run_dir}: cached prediction {meta['key']} does not belong to the folder's "
                              f"{len(truth)} {test_set} test images (another test seed?); use the ceiling run's own folder")
-        found[key] = hit_mask(*pose_errors_batch(est, truth), *MAIN_THRESHOLD)
-    if (NO_MARKERS, 0) not in found:
+        predictions[key] = est
+    if (NO_MARKERS, 0, 0, test_set) not in predictions:
         raise SystemExit(f"{run_dir}: no marker-free predictions for {test_set}; run `evaluate --ceiling` first")
-    runs = sorted(r for m, r in found if m == SINGLE)
+    runs = sorted(run for method, run, _, _ in predictions if method == SINGLE)
     if not runs or runs != list(range(len(runs))):
         raise SystemExit(f"{run_dir}: single-tag predictions for {test_set} are missing or incomplete "
                          f"({len(runs)} found); run `evaluate --ceiling` to the end first")
-    return found[(NO_MARKERS, 0)], np.stack([found[(SINGLE, c)] for c in runs])
+    return single_tag_hits(predictions, truth, test_set, len(runs))
 
 
 def main(argv=None) -> None:
@@ -71,7 +68,7 @@ def main(argv=None) -> None:
     ap.add_argument("run_dir", type=Path, help="output folder of `markerplace evaluate --ceiling`")
     ap.add_argument("--test-set", default="weighted")
     ap.add_argument("--k", default="10,20", help="marker budgets, comma-separated")
-    ap.add_argument("--splits", type=int, default=50, help="random half splits of the test images")
+    ap.add_argument("--splits", type=int, default=100, help="random splits of the test images")
     ap.add_argument("--draws", type=int, default=200, help="random k-subsets of candidates per split")
     ap.add_argument("--train-fraction", type=float, default=0.5,
                     help="share of the test images the held-out picks are made on (0.5: halves)")
@@ -79,7 +76,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     if not 0.0 < args.train_fraction < 1.0:
         raise SystemExit("--train-fraction must be between 0 and 1 (exclusive), e.g. 0.5")
-    base, hits = single_tag_hits(args.run_dir, args.test_set)
+    base, hits = cached_single_tag_hits(args.run_dir, args.test_set)
     C, Q = hits.shape
     fix = hits & ~base[None, :]
     print(f"test_images: {Q}")

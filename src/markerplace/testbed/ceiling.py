@@ -36,7 +36,7 @@ from .placements import NO_MARKERS, RESERVED_NAMES, PlacementRun
 log = logging.getLogger(__name__)
 
 __all__ = ["SINGLE", "CEILING", "single_placements", "oracle_order", "ceiling_placements", "ceiling_markdown",
-           "covered", "held_out_gains", "held_out_estimate"]
+           "single_tag_hits", "covered", "held_out_gains", "held_out_estimate"]
 
 SINGLE, CEILING = RESERVED_NAMES
 """Method names of the one-tag placements (run = candidate index) and of the oracle placements."""
@@ -82,9 +82,16 @@ def _hits(predictions: dict, key: tuple, truth: np.ndarray, threshold) -> np.nda
     return hit_mask(*pose_errors_batch(predictions[key], truth), *threshold)
 
 
-def _single_tag_hits(predictions: dict, truth: np.ndarray, test_set: str, C: int,
-                     threshold) -> tuple[np.ndarray, np.ndarray]:
-    """(Q,) bool localized without markers and (C, Q) bool localized with candidate c alone."""
+def single_tag_hits(predictions: dict, truth: np.ndarray, test_set: str, C: int,
+                    threshold=MAIN_THRESHOLD) -> tuple[np.ndarray, np.ndarray]:
+    """(Q,) bool localized without markers and (C, Q) bool localized with candidate c alone.
+
+    Args:
+        predictions: ``(method, run, k, test set)`` -> (Q, 4, 4) estimates; holds the marker-free
+            and every single-tag run of ``test_set``.
+        truth: (Q, 4, 4) true ``world_from_cam`` of the test images.
+        C: candidates.
+    """
     base = _hits(predictions, (NO_MARKERS, 0, 0, test_set), truth, threshold)
     singles = np.stack([_hits(predictions, (SINGLE, c, 1, test_set), truth, threshold) for c in range(C)]) \
         if C else np.zeros((0, len(truth)), bool)
@@ -144,7 +151,7 @@ def held_out_estimate(candidate_count: int, predictions: dict, test_poses: dict,
     rng = np.random.default_rng(seed)
     out = {}
     for ts, tp in test_poses.items():
-        base, singles = _single_tag_hits(predictions, tp.world_from_cam, ts, candidate_count, threshold)
+        base, singles = single_tag_hits(predictions, tp.world_from_cam, ts, candidate_count, threshold)
         if len(base) < 2 or candidate_count == 0:
             continue
         out[ts] = {k: tuple(100 * v for v in held_out_gains(base, singles, k, rng))
@@ -172,7 +179,7 @@ def ceiling_placements(candidate_world_from_marker: np.ndarray, tag_size: float,
     runs, estimate = [], {}
     kmax = min(max(ks), C)
     for ts, tp in test_poses.items():
-        base, singles = _single_tag_hits(predictions, tp.world_from_cam, ts, C, threshold)
+        base, singles = single_tag_hits(predictions, tp.world_from_cam, ts, C, threshold)
         order, gains = oracle_order(base, singles, kmax)
         estimate[ts] = {k: int(base.sum() + sum(gains[:k])) for k in ks if k <= kmax}
         log.info("ceiling %s: single-tag greedy picks %s fix %s of %d images that fail without markers", ts,
