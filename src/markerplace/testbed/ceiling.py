@@ -36,7 +36,7 @@ from .placements import NO_MARKERS, RESERVED_NAMES, PlacementRun
 log = logging.getLogger(__name__)
 
 __all__ = ["SINGLE", "CEILING", "single_placements", "oracle_order", "ceiling_placements", "ceiling_markdown",
-           "single_tag_hits", "covered", "held_out_gains", "held_out_estimate"]
+           "single_tag_hits", "single_tag_outcomes", "covered", "held_out_gains", "held_out_estimate"]
 
 SINGLE, CEILING = RESERVED_NAMES
 """Method names of the one-tag placements (run = candidate index) and of the oracle placements."""
@@ -141,35 +141,40 @@ def held_out_gains(base: np.ndarray, hits: np.ndarray, k: int, rng: np.random.Ge
     return float(np.mean(in_sample)), float(np.mean(held_out)), float(np.mean(random_gain))
 
 
-def held_out_estimate(candidate_count: int, predictions: dict, test_poses: dict, ks: Sequence[int], seed: int,
-                      threshold=MAIN_THRESHOLD) -> dict:
+def single_tag_outcomes(predictions: dict, test_poses: dict, C: int, threshold=MAIN_THRESHOLD) -> dict:
+    """:func:`single_tag_hits` of every test set (test set -> :class:`~markerplace.testbed.poses.TestPoses`):
+    test set -> ((Q,) bool without markers, (C, Q) bool with candidate c alone)."""
+    return {ts: single_tag_hits(predictions, tp.world_from_cam, ts, C, threshold) for ts, tp in test_poses.items()}
+
+
+def held_out_estimate(outcomes: dict, ks: Sequence[int], seed: int) -> dict:
     """:func:`held_out_gains` of every test set and k (k <= the candidates), as recall points.
+
+    Args:
+        outcomes: :func:`single_tag_outcomes`.
 
     Returns:
         test set -> k -> (in sample, held out, random) gains over no markers, points.
     """
     rng = np.random.default_rng(seed)
     out = {}
-    for ts, tp in test_poses.items():
-        base, singles = single_tag_hits(predictions, tp.world_from_cam, ts, candidate_count, threshold)
-        if len(base) < 2 or candidate_count == 0:
+    for ts, (base, singles) in outcomes.items():
+        C = len(singles)
+        if len(base) < 2 or C == 0:
             continue
-        out[ts] = {k: tuple(100 * v for v in held_out_gains(base, singles, k, rng))
-                   for k in sorted(set(ks)) if k <= candidate_count}
+        out[ts] = {k: tuple(100 * v for v in held_out_gains(base, singles, k, rng)) for k in sorted(set(ks)) if k <= C}
     return out
 
 
-def ceiling_placements(candidate_world_from_marker: np.ndarray, tag_size: float, predictions: dict,
-                       test_poses: dict, ks: Sequence[int], threshold=MAIN_THRESHOLD) -> tuple[list, dict]:
-    """The oracle placements of every test set and k, from the single-tag predictions.
+def ceiling_placements(candidate_world_from_marker: np.ndarray, tag_size: float, outcomes: dict,
+                       ks: Sequence[int]) -> tuple[list, dict]:
+    """The oracle placements of every test set and k, from the single-tag outcomes.
 
     Args:
         candidate_world_from_marker: (C, 4, 4) candidate poses.
         tag_size: black-square edge, metres.
-        predictions: holds ``(none, 0, 0, set)`` and ``(single, c, 1, set)`` for every c.
-        test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses`.
+        outcomes: :func:`single_tag_outcomes` (every test set).
         ks: marker budgets.
-        threshold: (metres, degrees) of a success.
 
     Returns:
         the :class:`PlacementRun` list (``ceiling``, k, that test set only) and, per test set,
@@ -178,8 +183,7 @@ def ceiling_placements(candidate_world_from_marker: np.ndarray, tag_size: float,
     C = len(candidate_world_from_marker)
     runs, estimate = [], {}
     kmax = min(max(ks), C)
-    for ts, tp in test_poses.items():
-        base, singles = single_tag_hits(predictions, tp.world_from_cam, ts, C, threshold)
+    for ts, (base, singles) in outcomes.items():
         order, gains = oracle_order(base, singles, kmax)
         estimate[ts] = {k: int(base.sum() + sum(gains[:k])) for k in ks if k <= kmax}
         log.info("ceiling %s: single-tag greedy picks %s fix %s of %d images that fail without markers", ts,

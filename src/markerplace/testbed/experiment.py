@@ -29,7 +29,8 @@ from ..runtime.executor import make_executor
 from ..runtime.stages import cached
 from ..io_utils import atomic_path
 from .calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
-from .ceiling import SINGLE, ceiling_markdown, ceiling_placements, held_out_estimate, single_placements
+from .ceiling import (SINGLE, ceiling_markdown, ceiling_placements, held_out_estimate, single_placements,
+                      single_tag_outcomes)
 from .images import BaseImages, TestbedImaging
 from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from .predict import ImageSet, predict_placements
@@ -167,11 +168,10 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
             predictions.update(predict_placements(tb, placements[:1] + singles, map_base, test_sets, codebook, cb_key,
                                                   lcfg, imaging, cache_dir, timings, reuse_unchanged))
+            outcomes = single_tag_outcomes(predictions, test_poses, len(data.disc.candidate_world_from_marker))
             ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
-                                                        plan_config.placement.tag_size, predictions, test_poses,
-                                                        config.study.ks)
-            held_out = held_out_estimate(len(data.disc.candidate_world_from_marker), predictions, test_poses,
-                                         config.study.ks, config.seed)
+                                                        plan_config.placement.tag_size, outcomes, config.study.ks)
+            held_out = held_out_estimate(outcomes, config.study.ks, config.seed)
             if by_spot:
                 ceiling_runs = with_candidate_ids(ceiling_runs, data.disc.candidate_world_from_marker)
             predictions.update(predict_placements(tb, placements[:1] + ceiling_runs, map_base, test_sets, codebook,
