@@ -30,15 +30,23 @@ from pathlib import Path
 
 import numpy as np
 
+from markerplace.plan import discretization
 from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
 from markerplace.testbed.placements import NO_MARKERS
+from markerplace.testbed.poses import TestPoses
 from markerplace.testbed.predictions import load_prediction
 
 
 def cached_single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:
     """(Q,) bool localized without markers and (C, Q) bool localized with candidate c alone,
-    from the predictions cached in ``run_dir/cache/predictions`` (main threshold)."""
-    truth = np.load(run_dir / f"test_poses_{test_set}.npz")["world_from_cam"]
+    from the predictions cached in ``run_dir/cache/predictions`` (main threshold); C is the
+    number of candidates of the run's plan (``run_dir/plan``), and every one must be there."""
+    for path in (run_dir / f"test_poses_{test_set}.npz", run_dir / "plan" / "discretization.npz"):
+        if not path.is_file():
+            raise SystemExit(f"{run_dir}: no {path.relative_to(run_dir)}; pass the output folder of "
+                             "`markerplace evaluate --ceiling`")
+    truth = TestPoses.load(run_dir / f"test_poses_{test_set}.npz").world_from_cam
+    n_candidates = len(discretization.load(run_dir / "plan" / "discretization.npz").candidate_world_from_marker)
     folder = run_dir / "cache" / "predictions"
     predictions: dict[tuple, np.ndarray] = {}
     for meta_path in sorted(folder.glob("*.meta.json")):
@@ -57,10 +65,12 @@ def cached_single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np
     if (NO_MARKERS, 0, 0, test_set) not in predictions:
         raise SystemExit(f"{run_dir}: no marker-free predictions for {test_set}; run `evaluate --ceiling` first")
     runs = sorted(run for method, run, _, _ in predictions if method == SINGLE)
-    if not runs or runs != list(range(len(runs))):
+    if runs != list(range(n_candidates)):
         raise SystemExit(f"{run_dir}: single-tag predictions for {test_set} are missing or incomplete "
-                         f"({len(runs)} found); run `evaluate --ceiling` to the end first")
-    return single_tag_hits(predictions, truth, test_set, len(runs))
+                         f"({len(runs)} of {n_candidates} candidates); run `evaluate --ceiling` to the end first "
+                         "(an evaluation with k = 1 among its budgets shares cache entries with them: "
+                         "leave 1 out of --k)")
+    return single_tag_hits(predictions, truth, test_set, n_candidates)
 
 
 def main(argv=None) -> None:
@@ -76,8 +86,16 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     if not 0.0 < args.train_fraction < 1.0:
         raise SystemExit("--train-fraction must be between 0 and 1 (exclusive), e.g. 0.5")
+    try:
+        ks = [int(v) for v in args.k.split(",")]
+    except ValueError:
+        raise SystemExit(f"--k must be comma-separated whole numbers, e.g. 10,20 (got {args.k!r})") from None
+    if min(ks) < 1:
+        raise SystemExit(f"--k budgets must be at least 1 (got {args.k!r})")
     base, hits = cached_single_tag_hits(args.run_dir, args.test_set)
     C, Q = hits.shape
+    if Q < 2:
+        raise SystemExit(f"{args.run_dir}: {Q} {args.test_set} test image(s); held-out splits need at least 2")
     fix = hits & ~base[None, :]
     print(f"test_images: {Q}")
     print(f"train_fraction: {args.train_fraction:g}")
@@ -87,7 +105,7 @@ def main(argv=None) -> None:
     print(f"fixes_per_candidate_median: {float(np.median(fix.sum(axis=1))):.1f}")
     print(f"fixes_per_candidate_max: {int(fix.sum(axis=1).max())}")
     rng = np.random.default_rng(args.seed)
-    for k in (min(int(v), C) for v in args.k.split(",")):
+    for k in dict.fromkeys(min(k, C) for k in ks):  # budgets above C are C; each printed once
         i, h, r = (100 * x for x in held_out_gains(base, hits, k, rng, args.train_fraction, args.splits, args.draws))
         full, _ = oracle_order(base, hits, k)
         full_gain = 100 * (covered(base, hits, full) - base.sum()) / Q

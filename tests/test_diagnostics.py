@@ -253,3 +253,34 @@ def test_ceiling_holdout_reads_the_evaluations_single_tag_runs(evaluation):
     # the same greedy picks from the same cached predictions as the evaluation's ceiling
     assert [float(v) for v in est.strip("|").split("|")[1:]] == \
         [float(got["k2_all_images_ceiling_estimate"]), float(got["k3_all_images_ceiling_estimate"])]
+
+
+def test_ceiling_holdout_refuses_a_run_whose_last_single_tag_runs_are_missing(evaluation, tmp_path):
+    """An interrupted `--ceiling` run holds the single-tag runs of the first candidates only: the
+    benchmark must refuse it, not report on fewer candidates."""
+    import json
+    import shutil
+
+    import pytest
+
+    run = tmp_path / "run"
+    (run / "plan").mkdir(parents=True)
+    shutil.copy(evaluation / "plan" / "discretization.npz", run / "plan")
+    shutil.copy(evaluation / "test_poses_weighted.npz", run)
+    shutil.copytree(evaluation / "cache" / "predictions", run / "cache" / "predictions")
+    metas = {}
+    for path in (run / "cache" / "predictions").glob("*.meta.json"):
+        meta = json.loads(path.read_text())
+        if meta.get("method") == "single" and meta.get("test_set") == "weighted":
+            metas[int(meta["run"])] = path
+    last = max(metas)
+    metas[last].unlink()  # the last candidate's run never finished
+    with pytest.raises(SystemExit, match=f"{last} of {last + 1} candidates"):
+        _ceiling_holdout().cached_single_tag_hits(run, "weighted")
+
+
+def test_main_threshold_falls_back_to_the_first_when_the_papers_is_not_measured():
+    from markerplace.testbed.metrics import MAIN_THRESHOLD, THRESHOLDS, main_threshold
+
+    assert main_threshold(THRESHOLDS) == MAIN_THRESHOLD
+    assert main_threshold(((0.1, 10.0), (1.0, 30.0))) == (0.1, 10.0)

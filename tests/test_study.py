@@ -57,3 +57,23 @@ def test_study_with_default_budgets_gets_past_its_settings(tmp_path, capsys):
     assert main(["study", "tiny", "--out", str(blocker / "study")]) == 2
     err = capsys.readouterr().err
     assert "is a file" in err and "-k" not in err
+
+
+def test_study_runs_leave_the_diagnostics_out_and_are_checked_first():
+    """A caller's `--ceiling`/`--calibration` must not reach the shifted or rescaled runs (the
+    ceiling refuses them: the study stopped after its first, longest evaluation); every run's
+    settings are checked before anything runs."""
+    import pytest
+
+    from markerplace.errors import UserError
+    from markerplace.testbed.config import DiagnosticsConfig, EvaluateConfig
+    from markerplace.testbed.study import StudyPlan, study_runs
+
+    config = EvaluateConfig(diagnostics=DiagnosticsConfig(ceiling=True, calibration=True))
+    runs = study_runs(config, StudyPlan(shifts=(0.25,), scales=(0.5,)))
+    assert list(runs) == ["default", "no-detection", "shift-0.25", "size-0.5"]
+    assert all(cfg.diagnostics == DiagnosticsConfig() for cfg in runs.values())
+    assert runs["shift-0.25"].study.shift == 0.25 and runs["size-0.5"].study.tag_scale == 0.5
+    assert runs["default"].test.sets == ("weighted", "uniform") and runs["no-detection"].localization.use_tags is False
+    with pytest.raises(UserError, match="shift"):
+        study_runs(config, StudyPlan(shifts=(-1.0,)))

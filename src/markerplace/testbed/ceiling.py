@@ -47,7 +47,15 @@ HELD_OUT_DRAWS = 100
 
 
 def single_placements(candidate_world_from_marker: np.ndarray, tag_size: float) -> list[PlacementRun]:
-    """One placement per candidate with its tag alone (tag id 0; run = candidate index)."""
+    """One placement per candidate with its tag alone (tag id 0; run = candidate index).
+
+    Args:
+        candidate_world_from_marker: (C, 4, 4) candidate marker poses, world frame, metres.
+        tag_size: black-square edge, metres.
+
+    Returns:
+        C ``single`` placements of k = 1, in candidate order.
+    """
     return [PlacementRun(SINGLE, c, 1, (Marker(0, tag_size, np.asarray(T, float).copy(), FAMILY),))
             for c, T in enumerate(candidate_world_from_marker)]
 
@@ -63,18 +71,18 @@ def oracle_order(base_hit: np.ndarray, single_hits: np.ndarray, k: int) -> tuple
     Returns:
         (k,) candidate indices in pick order and (k,) images each pick newly covers.
     """
-    covered = np.asarray(base_hit, bool).copy()
+    localized = np.asarray(base_hit, bool).copy()
     hits = np.asarray(single_hits, bool)
     C = hits.shape[0]
     remaining = np.ones(C, bool)
     order, gains = [], []
     for _ in range(min(int(k), C)):
-        gain = np.where(remaining, (hits & ~covered[None, :]).sum(axis=1), -1)
+        gain = np.where(remaining, (hits & ~localized[None, :]).sum(axis=1), -1)
         m = int(np.argmax(gain))  # first maximum: the smallest index among ties
         order.append(m)
         gains.append(int(gain[m]))
         remaining[m] = False
-        covered |= hits[m]
+        localized |= hits[m]
     return order, gains
 
 
@@ -90,7 +98,9 @@ def single_tag_hits(predictions: dict, truth: np.ndarray, test_set: str, C: int,
         predictions: ``(method, run, k, test set)`` -> (Q, 4, 4) estimates; holds the marker-free
             and every single-tag run of ``test_set``.
         truth: (Q, 4, 4) true ``world_from_cam`` of the test images.
+        test_set: the test set's name (the fourth element of the keys).
         C: candidates.
+        threshold: (metres, degrees) a test image's errors must be within to count as localized.
     """
     base = _hits(predictions, (NO_MARKERS, 0, 0, test_set), truth, threshold)
     singles = np.stack([_hits(predictions, (SINGLE, c, 1, test_set), truth, threshold) for c in range(C)]) \
@@ -116,28 +126,36 @@ def held_out_gains(base: np.ndarray, hits: np.ndarray, k: int, rng: np.random.Ge
     k-subsets of candidates, all as single-tag estimates (:func:`covered`).
 
     Args:
-        base: (Q,) bool, localized without markers.
+        base: (Q,) bool, localized without markers; Q >= 2.
         hits: (C, Q) bool, localized with candidate c alone.
         k: picks (at most C).
         rng: the random splits and subsets.
+        train_fraction: share of the Q images the held-out picks are made on (the rest, at least
+            one image, are scored; at least one image is picked on).
+        splits: random splits.
+        draws: random k-subsets of candidates per split.
 
     Returns:
         mean gains over no markers, as shares of the scored images: (in sample, held out, random).
     """
     C, Q = hits.shape
     k = min(int(k), C)
+    n_train = min(max(int(round(train_fraction * Q)), 1), Q - 1)
+    if n_train < 1:
+        raise ValueError(f"held-out gains need at least 2 test images, got {Q}")
     in_sample, held_out, random_gain = [], [], []
     for _ in range(splits):
-        a = np.zeros(Q, bool)
-        a[rng.permutation(Q)[: int(round(train_fraction * Q))]] = True
-        b = ~a
-        nb, base_b = int(b.sum()), int(base[b].sum())
-        picks_a, _ = oracle_order(base[a], hits[:, a], k)
-        picks_b, _ = oracle_order(base[b], hits[:, b], k)
-        in_sample.append((covered(base[b], hits[:, b], picks_b) - base_b) / nb)
-        held_out.append((covered(base[b], hits[:, b], picks_a) - base_b) / nb)
-        random_gain.append(np.mean([covered(base[b], hits[:, b], rng.choice(C, k, replace=False)) - base_b
-                                    for _ in range(draws)]) / nb)
+        train = np.zeros(Q, bool)
+        train[rng.permutation(Q)[:n_train]] = True
+        scored = ~train
+        n_scored, base_scored = int(scored.sum()), int(base[scored].sum())
+        base_s, hits_s = base[scored], hits[:, scored]
+        picks_train, _ = oracle_order(base[train], hits[:, train], k)
+        picks_scored, _ = oracle_order(base_s, hits_s, k)
+        in_sample.append((covered(base_s, hits_s, picks_scored) - base_scored) / n_scored)
+        held_out.append((covered(base_s, hits_s, picks_train) - base_scored) / n_scored)
+        random_gain.append(np.mean([covered(base_s, hits_s, rng.choice(C, k, replace=False)) - base_scored
+                                    for _ in range(draws)]) / n_scored)
     return float(np.mean(in_sample)), float(np.mean(held_out)), float(np.mean(random_gain))
 
 
@@ -152,9 +170,12 @@ def held_out_estimate(outcomes: dict, ks: Sequence[int], seed: int) -> dict:
 
     Args:
         outcomes: :func:`single_tag_outcomes`.
+        ks: marker budgets; those above the candidates are left out.
+        seed: seed of the splits and random subsets (one stream over the test sets and ks in order).
 
     Returns:
-        test set -> k -> (in sample, held out, random) gains over no markers, points.
+        test set -> k -> (in sample, held out, random) gains over no markers, points; test sets
+        with fewer than 2 images or no candidates are left out.
     """
     rng = np.random.default_rng(seed)
     out = {}
@@ -200,8 +221,17 @@ def ceiling_markdown(rows: list[dict], estimate: dict, ks: Sequence[int], thresh
                      held_out: dict | None = None) -> str:
     """``ceiling.md``: per test set and k, the ceiling (evaluated, and the single-tag estimate),
     every method's recall and its share of the achievable gain over the random mean; with
-    ``held_out`` (:func:`held_out_estimate`) the ceiling's lead over random subsets picked in
-    sample and held out."""
+    ``held_out`` the ceiling's lead over random subsets picked in sample and held out.
+
+    Args:
+        rows: the evaluation's recall rows (``test_set``, ``method``, ``k``, ``threshold``,
+            ``recall`` in [0, 1], ``n_tests``), as :func:`~markerplace.testbed.report.write_outputs` returns.
+        estimate: test set -> k -> images localized by no markers or one pick alone
+            (:func:`ceiling_placements`).
+        ks: marker budgets (columns).
+        threshold_label: the recall threshold the table reports (e.g. ``5cm/5deg``).
+        held_out: :func:`held_out_estimate`, or None to leave its rows out.
+    """
     from .placements import baseline_methods
 
     def recall(ts, method, k):

@@ -33,6 +33,7 @@ from .ceiling import (SINGLE, ceiling_markdown, ceiling_placements, held_out_est
                       single_tag_outcomes)
 from .images import BaseImages, TestbedImaging
 from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+from .metrics import main_threshold, threshold_label
 from .predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
@@ -168,7 +169,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
             predictions.update(predict_placements(tb, placements[:1] + singles, map_base, test_sets, codebook, cb_key,
                                                   lcfg, imaging, cache_dir, timings, reuse_unchanged))
-            outcomes = single_tag_outcomes(predictions, test_poses, len(data.disc.candidate_world_from_marker))
+            outcomes = single_tag_outcomes(predictions, test_poses, len(data.disc.candidate_world_from_marker),
+                                           main_threshold(config.thresholds))
             ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
                                                         plan_config.placement.tag_size, outcomes, config.study.ks)
             held_out = held_out_estimate(outcomes, config.study.ks, config.seed)
@@ -183,11 +185,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
                                   plan_config, scene=scene)
     if estimate is not None:
-        from .metrics import MAIN_THRESHOLD, threshold_label
-
         with atomic_path(out / "ceiling.md") as tmp:
-            tmp.write_text(ceiling_markdown(rows, estimate, sorted(set(config.study.ks)), threshold_label(MAIN_THRESHOLD),
-                                            held_out))
+            tmp.write_text(ceiling_markdown(rows, estimate, sorted(set(config.study.ks)),
+                                            threshold_label(main_threshold(config.thresholds)), held_out))
     if diag.calibration:
         from ..report.calibration_report import write_calibration_report
 

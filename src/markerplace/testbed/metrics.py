@@ -16,6 +16,12 @@ THRESHOLDS: tuple[tuple[float, float], ...] = ((0.01, 1.0), (0.05, 5.0), (0.10, 
 MAIN_THRESHOLD: tuple[float, float] = (0.05, 5.0)
 
 
+def main_threshold(thresholds: Sequence[tuple[float, float]]) -> tuple[float, float]:
+    """The threshold tables and diagnostics report: :data:`MAIN_THRESHOLD` when it is one of
+    ``thresholds`` ((metres, degrees) pairs), else the first of them."""
+    return MAIN_THRESHOLD if MAIN_THRESHOLD in thresholds else tuple(thresholds[0])
+
+
 def pose_errors_batch(est_world_from_cam: np.ndarray, true_world_from_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Translation (metres) and rotation (degrees) errors, the paper's delta_t and delta_R.
 

@@ -63,7 +63,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         arrays[f"{ts}_score"] = np.asarray(base_score)[test_poses[ts].source_index]
     write_recall_csv(out / "recall.csv", rows)
     write_npz(out / "query_errors.npz", **arrays)
-    main = metrics.threshold_label(metrics.MAIN_THRESHOLD) if metrics.MAIN_THRESHOLD in config.thresholds else labels[0]
+    main = metrics.threshold_label(metrics.main_threshold(config.thresholds))
     ks = sorted(set(config.study.ks))
     md = tables_markdown(rows, ks, main, labels)
     summary = main_tables_markdown(rows, ks, main).strip()

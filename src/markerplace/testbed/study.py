@@ -28,10 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from ..io_utils import atomic_path
+from .config import DiagnosticsConfig, validate_evaluate_config
 
 log = logging.getLogger(__name__)
 
-__all__ = ["StudyPlan", "run_study"]
+__all__ = ["StudyPlan", "study_runs", "run_study"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,39 @@ def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress
     return out
 
 
+def study_runs(config, plan: StudyPlan) -> dict:
+    """The study's evaluations and their settings, each checked before any runs.
+
+    Args:
+        config: :class:`~markerplace.testbed.config.EvaluateConfig` of the default run; its
+            methods, test sets, shift, size and diagnostics are set here.
+        plan: what the study varies.
+
+    Returns:
+        run name (``default``, ``no-detection``, ``shift-<D>``, ``size-<S>``) -> its config. The
+        default run evaluates none and OMP on both test sets; the others OMP on the weighted set
+        with one setting changed. None runs the oracle ceiling or the calibration: the study
+        compares settings, and those diagnostics refuse shifted or rescaled tags.
+    """
+    base_cfg = replace(config, test=replace(config.test, sets=("weighted", "uniform")),
+                       study=replace(config.study, methods=("none", "omp"), shift=0.0, tag_scale=1.0),
+                       diagnostics=DiagnosticsConfig())
+    runs = {"default": base_cfg}
+    weighted = replace(base_cfg.test, sets=("weighted",))
+    if plan.detection_off:
+        runs["no-detection"] = replace(base_cfg, test=weighted,
+                                       localization=replace(base_cfg.localization, use_tags=False))
+    for d in plan.shifts:
+        runs[f"shift-{d:g}"] = replace(base_cfg, test=weighted,
+                                       study=replace(base_cfg.study, methods=("omp",), shift=d))
+    for s in plan.scales:
+        runs[f"size-{s:g}"] = replace(base_cfg, test=weighted,
+                                      study=replace(base_cfg.study, methods=("omp",), tag_scale=s))
+    for cfg in runs.values():
+        validate_evaluate_config(cfg)
+    return runs
+
+
 def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyPlan = StudyPlan(),
               progress: bool = True) -> str:
     """Run the study (see the module docstring) and return ``study.md``'s text.
@@ -92,34 +126,23 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
         progress: progress bars.
     """
     from .experiment import run_evaluation
-    from .metrics import MAIN_THRESHOLD, threshold_label
+    from .metrics import main_threshold, threshold_label
 
     out = Path(out_dir)
     work = out / "work"
     ks = sorted(set(config.study.ks))
     plan_config = replace(plan_config, placement=replace(plan_config.placement, k=max(ks)))
+    runs = study_runs(config, plan)
     extra = _omp_variants(scene_spec, plan_config, work, plan, progress)
-    base_cfg = replace(config, test=replace(config.test, sets=("weighted", "uniform")),
-                       study=replace(config.study, methods=("none", "omp"), shift=0.0, tag_scale=1.0))
-    runs = {"default": (base_cfg, extra)}
-    weighted = replace(base_cfg.test, sets=("weighted",))
-    if plan.detection_off:
-        runs["no-detection"] = (replace(base_cfg, test=weighted,
-                                        localization=replace(base_cfg.localization, use_tags=False)), {})
-    for d in plan.shifts:
-        runs[f"shift-{d:g}"] = (replace(base_cfg, test=weighted, study=replace(base_cfg.study, methods=("omp",), shift=d)), {})
-    for s in plan.scales:
-        runs[f"size-{s:g}"] = (replace(base_cfg, test=weighted,
-                                      study=replace(base_cfg.study, methods=("omp",), tag_scale=s)), {})
-    for name, (cfg, ext) in runs.items():
+    for name, cfg in runs.items():
         log.info("study: evaluation %r", name)
         run_evaluation(scene_spec, plan_config, cfg, out / "runs" / name, progress=progress, work_dir=work,
-                       extra_placements=ext)
+                       extra_placements=extra if name == "default" else {})
 
-    threshold = MAIN_THRESHOLD if MAIN_THRESHOLD in config.thresholds else config.thresholds[0]
+    threshold = main_threshold(config.thresholds)
     label = threshold_label(threshold)
     hits = {name: {ts: _hits(out / "runs" / name, ts, threshold) for ts in cfg.test.sets}
-            for name, (cfg, _) in runs.items()}
+            for name, cfg in runs.items()}
     default_w = hits["default"]["weighted"]
     groups = _groups(hits, plan, plan_config.placement.v)
     md = _markdown(groups, default_w, ks, label, config.seed)
