@@ -165,12 +165,13 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         predictions = predict_placements(tb, placements, map_base, sets, codebook, cb_key, lcfg, imaging, cache_dir,
                                          timings, reuse_unchanged)
         estimate = held_out = None
+        threshold = main_threshold(config.thresholds)  # the ceiling's picks and ceiling.md's table
         if diag.ceiling:  # every candidate alone, the oracle's picks from those outcomes, then the picks
             test_sets = {ts: s for ts, s in sets.items() if ts != MAP_SET}
             predictions.update(predict_placements(tb, placements[:1] + singles, map_base, test_sets, codebook, cb_key,
                                                   lcfg, imaging, cache_dir, timings, reuse_unchanged))
             outcomes = single_tag_outcomes(predictions, test_poses, len(data.disc.candidate_world_from_marker),
-                                           main_threshold(config.thresholds))
+                                           threshold)
             ceiling_runs, estimate = ceiling_placements(data.disc.candidate_world_from_marker,
                                                         plan_config.placement.tag_size, outcomes, config.study.ks)
             held_out = held_out_estimate(outcomes, config.study.ks, config.seed)
@@ -187,7 +188,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     if estimate is not None:
         with atomic_path(out / "ceiling.md") as tmp:
             tmp.write_text(ceiling_markdown(rows, estimate, sorted(set(config.study.ks)),
-                                            threshold_label(main_threshold(config.thresholds)), held_out))
+                                            threshold_label(threshold), held_out))
     if diag.calibration:
         from ..report.calibration_report import write_calibration_report
 
