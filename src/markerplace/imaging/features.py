@@ -3,7 +3,7 @@
 Image i owns rows ``offsets[i]:offsets[i+1]`` of ``keypoints`` (K, 2) float32 pixels,
 ``descriptors`` (K, 128) uint8 (OpenCV SIFT values rounded) and ``points_world`` (K, 3) float32
 world metres (NaN where the depth gave no point), and tags ``tag_offsets[i]:tag_offsets[i+1]`` of
-``tag_ids`` (T,) int32 and ``tag_corners`` (T, 4, 2) float32 pixels (TL, TR, BR, BL). Optional
+``tag_ids`` (T,) int32 and ``tag_corners`` (T, 4, 2) float32 pixels (the detector's order: BL, BR, TR, TL). Optional
 per-image ``extras`` (e.g. ``candidate_unoccluded`` (N, C) bool) live next to them.
 
 Folders can be memory-mapped (workers read the map database without copying it), and

@@ -23,6 +23,7 @@ from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
 from ..runtime import cache
 from ..runtime.executor import RuntimeConfig, make_executor
 from ..runtime.stages import cached
+from ..render.tags import DRAWING_VERSION
 from ..scene.spec import SceneSpec
 from .discretization import Discretization
 from .discretization import load as load_discretization
@@ -212,7 +213,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     sizes = [config.placement.tag_size] * C + [m.size for m in existing]
     in_view = geometric_visibility(disc.world_from_cam, all_T, config)
 
-    obs_key = cache.hash_of("observe-v2", disc_key, config.imaging, all_T, sizes)
+    obs_key = cache.hash_of("observe-v2", DRAWING_VERSION, disc_key, config.imaging, all_T, sizes)
 
     def run_observe() -> FeatureSet:
         log.info("observe: rendering and extracting SIFT at %d poses", N)

@@ -26,6 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from ..imaging.features import ImageFeatures
+from ..render.tags import DRAWING_VERSION
 from ..runtime import cache
 from .images import BaseImages, TestbedImaging
 from .maps import localize_task, save_map
@@ -136,7 +137,7 @@ class RenderedFeatures:
         self.store, self.set_key = store, set_key
 
     def _store_key(self, tb: TestbedImaging, i: int, key: tuple) -> str:
-        return cache.hash_of("render-v1", self.set_key, i, tb.appearance(key))
+        return cache.hash_of("render-v1", DRAWING_VERSION, self.set_key, i, tb.appearance(key))
 
     def update(self, tb: TestbedImaging, world_from_cam: np.ndarray, keys: list, markers: Sequence, map_only: bool,
                desc: str, indices: Sequence[int] | None = None) -> dict[int, ImageFeatures]:
@@ -312,8 +313,8 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
         for s in sets.values():
             if p.test_sets is not None and s.name not in p.test_sets and not s.own:
                 continue
-            key = cache.hash_of("prediction-v1", cb_key, s.world_from_cam, marker_arr, lcfg, imaging) if s.exclude is None \
-                else cache.hash_of("map-prediction-v1", cb_key, s.world_from_cam, s.exclude, marker_arr, lcfg, imaging)
+            key = cache.hash_of("prediction-v1", DRAWING_VERSION, cb_key, s.world_from_cam, marker_arr, lcfg, imaging) if s.exclude is None \
+                else cache.hash_of("map-prediction-v1", DRAWING_VERSION, cb_key, s.world_from_cam, s.exclude, marker_arr, lcfg, imaging)
             est = load_prediction(pred_dir, key)
             if est is not None:
                 predictions[(p.method, p.run, p.k, s.name)] = est
