@@ -233,7 +233,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     if config.placement.similarity:
         sim_key = cache.hash_of("similarity-v2", obs_key, config.similarity)
         n_similar = cached("similarity", run_dir / "similarity.npz", sim_key,
-                           lambda: count_similar(descriptors, points, config.similarity),
+                           lambda: count_similar(descriptors, points, config.similarity, progress=progress),
                            lambda n, path: write_npz(path, n_similar=n),
                            lambda path: np.load(path, allow_pickle=False)["n_similar"], timings)
     else:
