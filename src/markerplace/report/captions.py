@@ -159,9 +159,10 @@ class WallEnd:
     distance: float
     kind: str
 
-    def words(self) -> str:
-        """``"corner"``, ``"door edge"``, ``"end of the wall"`` or ``"nothing within 15 m"``."""
-        return {"corner": "corner", "door edge": "door edge", "wall end": "end of the wall"}.get(
+    def words(self, surface: str = "wall") -> str:
+        """``"corner"``, ``"door edge"``, ``"end of the wall"`` (of the ``surface`` the tag is on)
+        or ``"nothing within 15 m"``."""
+        return {"corner": "corner", "door edge": "door edge", "wall end": f"end of the {surface}"}.get(
             self.kind, f"nothing within {MAX_RANGE:g} m")
 
 
@@ -237,6 +238,7 @@ class TagPlace:
         left, right: the nearest references on the viewer's left and right (:class:`WallEnd`).
         normal, tangent: (3,) fitted wall normal and the viewer's right along the wall.
         on_wall: (3,) point on the wall surface behind the tag centre.
+        surface: what the tag is on (``"wall"`` unless the plan says otherwise).
     """
 
     facing: str
@@ -248,6 +250,7 @@ class TagPlace:
     normal: np.ndarray
     tangent: np.ndarray
     on_wall: np.ndarray
+    surface: str = "wall"
 
     @property
     def nearest(self) -> tuple[str, WallEnd]:
@@ -274,9 +277,9 @@ class TagPlace:
         other_side, other = ("right", self.right) if side == "left" else ("left", self.left)
         if not np.isfinite(end.distance):
             return f"no corner or door edge within {MAX_RANGE:g} m on either side"
-        text = f"{end.distance:.2f} m from the {end.words()} on its {side}"
+        text = f"{end.distance:.2f} m from the {end.words(self.surface)} on its {side}"
         if np.isfinite(other.distance):
-            text += f"; {other.distance:.2f} m from the {other.words()} on its {other_side}"
+            text += f"; {other.distance:.2f} m from the {other.words(self.surface)} on its {other_side}"
         return text
 
 

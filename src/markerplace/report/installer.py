@@ -13,7 +13,9 @@ markers as textured quads):
 
 The camera always stands in free space: a ray from the tag along its normal (at its height)
 stops at the first obstacle, the camera keeps :data:`BODY_CLEARANCE` from it, and its grid cell
-in the discretization's occupancy must be free (stepping closer until one is; see
+in the discretization's occupancy must be free (stepping closer until one is); it also steps
+closer until nothing stands between it and the tag (and, in the wide view, the corner or door
+edge the dimension line runs to), so it never looks through a doorway from the next room (see
 :func:`standing_distance`).
 
 Frames: the scene's internal frame (world z up, metres); images are RGB uint8, row 0 on top.
@@ -51,7 +53,7 @@ DIMENSION_RGB = (255, 140, 0)
 
 
 def standing_distance(caster, occupancy: np.ndarray | None, origin: Sequence[float], resolution: float,
-                      position: np.ndarray, normal: np.ndarray, want: float) -> float:
+                      position: np.ndarray, normal: np.ndarray, want: float, see: np.ndarray | None = None) -> float:
     """How far in front of a tag a camera can stand, metres (at most ``want``).
 
     Args:
@@ -61,26 +63,47 @@ def standing_distance(caster, occupancy: np.ndarray | None, origin: Sequence[flo
         origin / resolution: the grid's lower-left corner (x0, y0) and cell size, metres.
         position: (3,) tag centre; normal: (3,) horizontal wall normal towards the room.
         want: preferred distance, metres.
+        see: (K, 3) points the camera must have in sight (nothing in between), e.g. the tag and
+            the corner its dimension line runs to; None: none.
 
     Returns:
         The largest distance in steps of 0.1 m from ``want`` down to :data:`MIN_DISTANCE` whose
-        camera is at least :data:`BODY_CLEARANCE` short of the first obstacle along the normal
-        and on a free occupancy cell; if no such step, the largest one short of the obstacle;
-        never below 0.3 m.
+        camera is at least :data:`BODY_CLEARANCE` short of the first obstacle along the normal,
+        on a free occupancy cell and in sight of ``see`` (a camera looking through a doorway
+        from the next room steps into the tag's room); without such a step, the largest one
+        that meets the first two; without that, the largest one short of the obstacle; never
+        below 0.3 m.
     """
     p = np.asarray(position, float)
     n = np.asarray(normal, float)
     hit, _ = caster.first_hits((p + 0.05 * n)[None], n[None], max_t=want + 1.0)
     limit = min(want, float(hit[0]) + 0.05 - BODY_CLEARANCE) if np.isfinite(hit[0]) else want
     steps = np.round(np.arange(limit, MIN_DISTANCE - 1e-9, -0.1), 3)
-    if occupancy is not None:
+
+    def free(d: float) -> bool:
+        if occupancy is None:
+            return True
         H, W = occupancy.shape
-        for d in steps:
-            c = p + d * n
-            col = int(np.floor((c[0] - origin[0]) / resolution))
-            row = int(np.floor((c[1] - origin[1]) / resolution))
-            if 0 <= row < H and 0 <= col < W and occupancy[row, col] == 0:
-                return float(d)
+        c = p + d * n
+        col = int(np.floor((c[0] - origin[0]) / resolution))
+        row = int(np.floor((c[1] - origin[1]) / resolution))
+        return 0 <= row < H and 0 <= col < W and occupancy[row, col] == 0
+
+    def in_sight(d: float) -> bool:
+        if see is None or len(see) == 0:
+            return True
+        pts = np.asarray(see, float).reshape(-1, 3)
+        c = p + d * n
+        dist = np.linalg.norm(pts - c, axis=1)
+        t, _ = caster.first_hits(np.tile(c, (len(pts), 1)), pts - c, max_t=dist)
+        return bool(np.all(~np.isfinite(t) | (t >= dist - 0.05)))
+
+    ok = [d for d in steps if free(d)]
+    seen = [d for d in ok if in_sight(d)]
+    if seen:
+        return float(seen[0])
+    if ok:
+        return float(ok[0])
     return float(max(limit, 0.3)) if len(steps) == 0 else float(steps[0])
 
 
@@ -323,8 +346,10 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
             n = np.asarray(place.normal, float)
             occ = occupancy_of(i)
             yaw = float(np.arctan2(-n[1], -n[0]))
-            d_close = standing_distance(caster, occ, origin, resolution, p, n, CLOSE_DISTANCE)
-            d_wide = max(standing_distance(caster, occ, origin, resolution, p, n, WIDE_DISTANCE), d_close)
+            ref = place.reference_point()
+            see = np.array([p + 0.02 * n] + ([] if ref is None else [ref + 0.02 * n]))
+            d_close = standing_distance(caster, occ, origin, resolution, p, n, CLOSE_DISTANCE, see[:1])
+            d_wide = max(standing_distance(caster, occ, origin, resolution, p, n, WIDE_DISTANCE, see), d_close)
             T_close = world_from_cam_pose(p + d_close * n, yaw)
             T_wide = world_from_cam_pose(p + d_wide * n, yaw + wide_turn(place, d_wide))
             close_layout = LabelLayout(W, H)
@@ -334,7 +359,6 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
             wide = wide_r.render(T_wide, depth=False, normal=False).rgb
             layout = LabelLayout(W, H)
             wide = draw_outline(wide, wide_intr.K, T_wide, m, labels[i], thickness=2, layout=layout)
-            ref = place.reference_point()
             front = place.on_wall + 0.01 * n
             side = -1.0
             if ref is not None:
@@ -343,7 +367,7 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
                 below = np.array([0.0, 0.0, 0.6 * outer_size(m.size) + 0.12])  # under the outline, not across the tag
                 wide = draw_dimension(wide, wide_intr.K, T_wide, front, front - below, "", ticks=False, layout=layout)
                 wide = draw_dimension(wide, wide_intr.K, T_wide, front - below, ref + 0.01 * n - below,
-                                      f"{end.distance:.2f} m to the {end.words()}", text_below=True, layout=layout)
+                                      f"{end.distance:.2f} m to the {end.words(place.surface)}", text_below=True, layout=layout)
             beside = front + side * (0.6 * outer_size(m.size) + 0.15) * place.tangent
             wide = draw_dimension(wide, wide_intr.K, T_wide, np.array([beside[0], beside[1], place.floor_z]), beside,
                                   f"{place.height:.2f} m", layout=layout)

@@ -142,7 +142,7 @@ def place_from_install(install: dict) -> TagPlace:
 
     return TagPlace(facing_label(n), install["wall"], float(install["height_m"]), float(install["floor_z"]),
                     end("left"), end("right"), n, np.asarray(install["right_dir"], float),
-                    np.asarray(install["wall_point"], float))
+                    np.asarray(install["wall_point"], float), install.get("surface") or "wall")
 
 
 def storey_words(install: dict) -> str:
@@ -156,13 +156,12 @@ def storey_words(install: dict) -> str:
 
 
 def wall_words(install: dict) -> str:
-    """E.g. ``"living: north wall (faces south)"``, or ``"on a bookcase front at the north wall
+    """E.g. ``"north wall of the kitchen (faces south)"``, or ``"bookcase front at the north wall
     (faces south)"`` when the tag is on something else than a wall."""
-    where = f"{install['wall']} wall (faces {install['facing']})"
+    where = f"{install['wall']} wall" + (f" of the {install['room']}" if install.get("room") else "") + \
+        f" (faces {install['facing']})"
     surface = install.get("surface") or "wall"
-    if surface != "wall":
-        where = f"{surface} at the {where}"
-    return f"{install['room']}: {where}" if install.get("room") else where
+    return where if surface == "wall" else f"{surface} at the {where}"
 
 
 def height_words(install: dict) -> str:
@@ -180,7 +179,7 @@ def along_words(install: dict, both: bool = True) -> str:
         e = install[side]
         if e["distance_m"] is None:
             continue
-        word = {"corner": "corner", "door edge": "door edge"}.get(e["reference"], f"end of the {surface}")
+        word = WallEnd(0.0, e["reference"]).words(surface)
         parts.append(f"{e['distance_m']:.2f} m from the {word} on the left" if side == "left"
                      else f"{e['distance_m']:.2f} m from the {word} on the right")
         if not both:
