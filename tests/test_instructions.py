@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import re
 import shutil
 import subprocess
 
@@ -221,3 +222,33 @@ def test_sheets_are_said_before_writing_and_a_warning_offers_alternatives(tmp_pa
     with caplog.at_level(logging.INFO, logger="markerplace.report.pdf"):
         assert write_tags_pdf(tmp_path / "t.pdf", recs[:2], "a4") == 26
     assert "26 sheet(s) in all" in caplog.text and "fewer sheets" in caplog.text
+
+
+def floats_in(obj):
+    if isinstance(obj, float):
+        yield obj
+    elif isinstance(obj, dict):
+        for v in obj.values():
+            yield from floats_in(v)
+    elif isinstance(obj, list):
+        for v in obj:
+            yield from floats_in(v)
+
+
+def test_every_json_of_the_plan_has_clean_numbers(room_plan):
+    """No -0.0 in any JSON file of the run, and no float with more than 12 significant digits
+    (binary noise such as 11.100000000000001) but in the tag maps (exact on purpose: robots read
+    them back to the last bit)."""
+    import math
+
+    files = sorted(room_plan.glob("*.json")) + sorted(room_plan.glob("tagmaps/*.json"))
+    assert {p.name for p in files} >= {"placement.json", "config.json", "discretization.npz.meta.json",
+                                       "wpilib_field_layout.json"}
+    for path in files:
+        values = list(floats_in(json.loads(path.read_text())))
+        assert values or path.name.endswith("meta.json")
+        for v in values:
+            assert not (v == 0 and math.copysign(1.0, v) < 0), (path.name, "-0.0")
+            assert path.parent.name == "tagmaps" or not math.isfinite(v) or float(f"{v:.12g}") == v, (path.name, v)
+    for path in room_plan.glob("tagmaps/*.yaml"):
+        assert not re.search(r"-0\.0(?![\d])", path.read_text()), path.name

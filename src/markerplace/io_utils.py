@@ -1,8 +1,8 @@
 """Atomic file writes: a crash never leaves a half-written artifact behind; clean numbers in them.
 
 Every JSON file the tool writes goes through :func:`write_json`, which writes floats rounded to
-:data:`JSON_DIGITS` significant digits and never ``-0.0`` (:func:`clean_numbers`): ``11.1``, not
-``11.100000000000001``. Text tables and messages format numbers with :func:`fixed` (no
+:data:`JSON_DIGITS` significant digits (or 9 decimals, when finer) and never ``-0.0``
+(:func:`clean_numbers`): ``11.1``, not ``11.100000000000001``. Text tables and messages format numbers with :func:`fixed` (no
 ``-0.000``).
 """
 
@@ -39,18 +39,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
 
 JSON_DIGITS = 12
-"""Significant digits of every float in the JSON files the tool writes: a relative error of at
-most 5e-13, a tenth of a micrometre at 100 km from the origin, far below anything measured."""
+"""Significant digits of every float in the JSON files the tool writes (a relative error of at
+most 5e-13), but never coarser than :data:`JSON_DECIMALS` decimals (survey coordinates keep a
+nanometre)."""
+JSON_DECIMALS = 9
 
 
 def clean_float(value: float, digits: int | None = JSON_DIGITS) -> float:
-    """``value`` rounded to ``digits`` significant digits (None: unchanged), ``-0.0`` as ``0.0``;
-    NaN and infinities unchanged. Idempotent: cleaning a cleaned value changes nothing."""
+    """``value`` rounded to ``digits`` significant digits or :data:`JSON_DECIMALS` decimals,
+    whichever is finer (None: unchanged), ``-0.0`` as ``0.0``; NaN and infinities unchanged.
+    Idempotent: cleaning a cleaned value changes nothing."""
     v = float(value)
     if not math.isfinite(v):
         return v
     if digits is not None:
-        v = float(f"{v:.{digits}g}")
+        v = round(v, JSON_DECIMALS) if abs(v) >= 10.0 ** (digits - JSON_DECIMALS) else float(f"{v:.{digits}g}")
     return v + 0.0  # -0.0 + 0.0 == +0.0
 
 

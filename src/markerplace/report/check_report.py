@@ -197,8 +197,8 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
               locations=disc.locations, location_panel=np.array([slots[int(s)] for s in disc.location_storey]),
               panel_titles=[f"storey {s}: floor {storeys[s]:.2f} m" for s in disc.planned_storeys],
               values=loc_drop, cmap="gray_r", value_range=(0.0, max(float(loc_drop.max(initial=0.0)), 1e-6)),
-              title="Score lost per camera location, installed vs planned (dark = more lost); tags numbered by "
-                    "placement order, + extra, magenta x missing",
+              title="Score lost per camera location, installed vs planned (dark = more lost)\n"
+                    "tags numbered by placement order as on placement.png; +id extra; magenta x missing",
               colorbar_label="mean score drop over yaws (nats)",
               markers_xy=inst[:, :2], markers_normal=np.array([m.normal[:2] for m in installed_user]).reshape(-1, 2),
               marker_labels=[str(order_of[int(m.tag_id)]) if int(m.tag_id) in order_of else f"+{m.tag_id}"
