@@ -115,9 +115,35 @@ def install_instructions(scene, markers: Sequence, storeys: Sequence[int], store
     return out
 
 
+POINT_DECIMALS = 4
+"""Points, heights and distances of an ``install`` object are rounded to 0.1 mm."""
+VECTOR_DECIMALS = 6
+
+
+def _rounded(install: dict) -> dict:
+    """``install`` with points, heights and distances rounded to :data:`POINT_DECIMALS`, unit
+    vectors to :data:`VECTOR_DECIMALS` and the facing angle to 0.01 degree."""
+    def pts(v, k=POINT_DECIMALS):
+        return None if v is None else [round(float(x), k) + 0.0 for x in v]
+
+    d = dict(install)
+    for key in ("storey_floor_z", "floor_z", "height_m"):
+        d[key] = round(float(d[key]), POINT_DECIMALS) + 0.0
+    d["facing_deg"] = round(float(d["facing_deg"]), 2) % 360.0 + 0.0
+    d["wall_point"] = pts(d["wall_point"])
+    d["wall_normal"], d["right_dir"] = pts(d["wall_normal"], VECTOR_DECIMALS), pts(d["right_dir"], VECTOR_DECIMALS)
+    for side in ("left", "right"):
+        e = dict(d[side])
+        e["distance_m"] = None if e["distance_m"] is None else round(float(e["distance_m"]), POINT_DECIMALS) + 0.0
+        e["point"] = pts(e["point"])
+        d[side] = e
+    return d
+
+
 def install_to_frame(install: dict, offset) -> dict:
     """A copy of ``install`` with its points and heights moved by ``offset`` (3,) metres (e.g. the
-    internal frame to the user's: ``p_user = p_internal + offset``)."""
+    internal frame to the user's: ``p_user = p_internal + offset``; None: not moved), rounded
+    (points to 0.1 mm, unit vectors to 1e-6)."""
     o = np.zeros(3) if offset is None else np.asarray(offset, float)
     d = dict(install)
     d["storey_floor_z"] = install["storey_floor_z"] + o[2]
@@ -128,7 +154,7 @@ def install_to_frame(install: dict, offset) -> dict:
         if e.get("point") is not None:
             e["point"] = [float(v) for v in np.add(e["point"], o)]
         d[side] = e
-    return d
+    return _rounded(d)
 
 
 def place_from_install(install: dict) -> TagPlace:
