@@ -81,13 +81,13 @@ def test_tag_near_a_door_reports_the_door_edge(caster):
     # on the east wall (faces west), 0.9 m south of the door's south jamb at y = 1.5
     place = describe_tag(caster, np.array([5.0, 0.6, 1.5]), np.array([-1.0, 0.0, 0.0]), 0.0)
     assert place.wall == "east"
-    assert place.left.kind == "edge" and place.left.distance == pytest.approx(0.9, abs=0.02)  # north = left
+    assert place.left.kind == "door edge" and place.left.distance == pytest.approx(0.9, abs=0.02)  # north = left
     assert place.right.kind == "corner" and place.right.distance == pytest.approx(0.6, abs=0.02)
     assert place.nearest[0] == "right"
     place = describe_tag(caster, np.array([5.0, 3.3, 1.5]), np.array([-1.0, 0.0, 0.0]), 0.0)
     side, end = place.nearest  # 0.9 m north of the door's north jamb at y = 2.4, 0.7 m from the corner
     assert side == "left" and end.kind == "corner" and end.distance == pytest.approx(0.7, abs=0.02)
-    assert place.right.kind == "edge" and place.right.distance == pytest.approx(0.9, abs=0.02)
+    assert place.right.kind == "door edge" and place.right.distance == pytest.approx(0.9, abs=0.02)
 
 
 def test_a_picture_does_not_end_the_wall_and_a_tilted_normal_is_fitted(caster):
@@ -100,11 +100,16 @@ def test_a_picture_does_not_end_the_wall_and_a_tilted_normal_is_fitted(caster):
     assert abs(place.normal[1] + 1.0) < 1e-3  # the wall's own normal, not the given one
 
 
-def test_height_above_a_raised_floor():
-    stage = box("stage", (0, 0, 0), (5, 1.5, 0.2))  # a 0.2 m platform along the south wall
+def test_height_is_above_the_floor_given_not_the_furniture():
+    # a 0.75 m dining table against the south wall: the height is above the floor the plan gives
+    table = box("table", (1.5, 0.0, 0.72), (3.5, 0.9, 0.75))
+    rc = RayCaster(*room_scene([table]).geometry())
+    place = describe_tag(rc, np.array([2.5, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]), 0.0)
+    assert place.floor_z == 0.0 and place.height == pytest.approx(1.5)
+    stage = box("stage", (0, 0, 0), (5, 1.5, 0.2))  # a 0.2 m platform along the south wall: its floor is given
     rc = RayCaster(*room_scene([stage]).geometry())
-    place = describe_tag(rc, np.array([2.5, 0.0, 1.7]), np.array([0.0, 1.0, 0.0]), 0.0)
-    assert place.floor_z == pytest.approx(0.2, abs=0.01) and place.height == pytest.approx(1.5, abs=0.01)
+    place = describe_tag(rc, np.array([2.5, 0.0, 1.7]), np.array([0.0, 1.0, 0.0]), 0.2)
+    assert place.floor_z == pytest.approx(0.2) and place.height == pytest.approx(1.5)
 
 
 def test_installer_camera_stays_in_free_space():
@@ -188,8 +193,8 @@ def test_plan_report_in_browser(tmp_path_factory, browser, capsys):
     assert {"placement.png", "scores.png"} <= set(alts)
     assert sum("close view" in a for a in alts) == 2 and sum("wide view" in a for a in alts) == 2
     assert "Scores before and after" in page["text"] and "10th percentile" in page["text"]
-    assert page["text"].count(" m above the floor in front of it") == 2
-    assert re.search(r"\d\.\d\d m from the (corner|edge of its surface) on its (left|right)", page["text"])
+    assert page["text"].count(" m above the floor (the middle of the black square") == 2
+    assert re.search(r"\d\.\d\d m from the (corner|door edge|end of the wall) on the (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
 
 

@@ -61,7 +61,13 @@ def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
 def test_write_tag_sheets_names_captions_and_cleanup(tmp_path) -> None:
     rec = dict(order=3, tag_id=17, family="tag36h11", size=0.4, position=[1.0, 2.5, 1.5], yaw_deg=90.0)
     assert caption_for(rec) == ["#3  tag36h11 id 17  black square 400 mm",
-                                "tag centre (1.00, 2.50, 1.50) m, facing 90 deg", "this side down"]
+                                "tag centre (1.00, 2.50, 1.50) m, facing 90 deg", "this edge down"]
+    install = {"storey": 1, "room": "study", "wall": "north", "facing": "south", "surface": "wall", "height_m": 1.5,
+               "measure_from": "right", "left": {"reference": "corner", "distance_m": 2.0},
+               "right": {"reference": "door edge", "distance_m": 0.45}}
+    assert caption_for({**rec, "install": install}) == [
+        "#3  tag36h11 id 17  black square 400 mm", "storey 1, north wall of the study (faces south)",
+        "centre 1.50 m above the floor; 0.45 m from the door edge on the right", "this edge down"]
     (tmp_path / "tags").mkdir()
     (tmp_path / "tags" / "01_tag5.svg").write_text("stale")
     paths = write_tag_sheets(tmp_path / "tags", [rec, {**rec, "order": 4, "tag_id": 18}])

@@ -114,7 +114,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
-                                 method=config.placement.method, scene_source=args.scene, existing=existing,
+                                 method=config.placement.method, scene_source=args.scene, scene=scene, existing=existing,
                                  world_offset=offset, paper=args.paper,
                                  scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed})
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
@@ -196,9 +196,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+SIGNED_VALUE_OPTIONS = ("--up", "--start", "--pose")
+"""Options whose value may start with '-' (``--up -x``, ``--start -2.5,1``): argparse would read it
+as an option ("expected one argument"), so :func:`join_signed_values` glues it on with '='."""
+
+
+def join_signed_values(argv: list[str]) -> list[str]:
+    """``[..., "--up", "-x", ...]`` -> ``[..., "--up=-x", ...]`` for :data:`SIGNED_VALUE_OPTIONS`
+    followed by a value that starts with '-' (and is not ``--``-anything); the rest unchanged."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in SIGNED_VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and not argv[i + 1].startswith("--") and len(argv[i + 1]) > 1:
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
     setup_logging(quiet=args.quiet, verbose=args.verbose)
     func = getattr(args, "func", None)
     if func is None:

@@ -2,9 +2,10 @@
 
 Each file is a vector drawing (millimetre units, so any printer or print shop reproduces the
 size exactly) of the tag36h11 pattern with its white quiet zone (:func:`markerplace.render.tags.
-outer_size`), and below it a caption strip: placement order, tag id, black-square size,
-position and facing direction. The caption is outside the quiet zone, so it never touches the
-pattern, and it marks the tag's bottom edge: hang the sheet caption-side down.
+outer_size`), and below it a caption strip: placement order, tag id, black-square size, where
+it hangs (storey, wall, height, distance along the wall) and "this edge down". The caption is
+outside the quiet zone, so it never touches the pattern, and it marks the tag's bottom edge:
+hang the sheet caption-side down.
 """
 
 from __future__ import annotations
@@ -75,12 +76,12 @@ def tag_svg(tag_id: int, size_m: float, caption: Sequence[str]) -> str:
 
 
 def caption_for(record: dict) -> list[str]:
-    """Caption lines of a ``placement.json`` marker record."""
-    x, y, z = record["position"]
-    return [f"#{record['order']}  {record['family']} id {record['tag_id']}  "
-            f"black square {1000 * record['size']:.0f} mm",
-            f"tag centre ({x:.2f}, {y:.2f}, {z:.2f}) m, facing {record['yaw_deg']:.0f} deg",
-            "this side down"]
+    """Caption lines of a ``placement.json`` marker record: order, id and size; where it hangs
+    (from its ``install`` object: storey, wall, height above the floor, distance to the nearer
+    corner or door edge); "this edge down" (:func:`markerplace.report.instructions.caption_lines`)."""
+    from .instructions import caption_lines
+
+    return caption_lines(record)
 
 
 def write_tag_sheets(folder: str | Path, records: Sequence[dict]) -> list[Path]:

@@ -30,7 +30,8 @@ a facing viewer's right, y up):
   ``map_from_camera = map_from_(map_tag36h11_<id>) @ inverse(camera_from_(tag36h11_<id>))``: the
   two tag frames are one physical frame under two names (a tf2 frame has one parent).
 
-Numbers are written with Python's shortest round-trip repr, so reading a file back gives the
+Numbers are written with Python's shortest round-trip repr (never ``-0.0``:
+:func:`markerplace.io_utils.clean_float` without rounding), so reading a file back gives the
 poses to the last bit of the quaternion / rotation-vector conversion (well under 1e-9).
 """
 
@@ -42,7 +43,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..io_utils import atomic_path
+from ..io_utils import atomic_path, clean_float, clean_numbers
 
 MARKER_FROM_WPILIB = np.array([[0.0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
 """(4, 4) pose of WPILib's tag frame in markerplace's marker frame: WPILib x = marker z (out of
@@ -75,7 +76,7 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
 
 def _num(v: float) -> str:
     """A float as YAML 1.1 and 1.2 both read it back exactly (``1e-05`` -> ``1.0e-05``)."""
-    s = repr(float(v))
+    s = repr(clean_float(v, None))  # exact, never -0.0
     if "e" in s and "." not in s.split("e")[0]:
         s = s.replace("e", ".0e", 1)
     return s
@@ -274,7 +275,7 @@ def write_tag_maps(folder: str | Path, markers: Sequence, *, name: str, field: t
                        "the scene file's own axes (model frame with the up-axis rotation undone), metres"))
     written = []
     for suffix, ms, note in frames:
-        texts = {"wpilib": json.dumps(wpilib_layout(ms, field), indent=2) + "\n",
+        texts = {"wpilib": json.dumps(clean_numbers(wpilib_layout(ms, field), None), indent=2) + "\n",
                  "apriltag_ros": apriltag_ros_yaml(ms, name, note),
                  "tagslam": tagslam_yaml(ms, name, note, size),
                  "ros2_params": ros2_params_yaml(ms, size, note),

@@ -234,7 +234,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
             return model
 
         model = cached(f"calibration {name}", run_dir / f"success_model_{name}.json", key, fit,
-                       lambda m, p: write_json(p, m.to_json()),
+                       lambda m, p: write_json(p, m.to_json(), digits=None),  # exact: reruns reuse it
                        lambda p: SuccessModel.from_json(json.loads(Path(p).read_text())), data.timings)
         data.calibration[name] = {"model": model, "coverages": covs}
 
