@@ -97,6 +97,11 @@ def wall_side(normal: np.ndarray) -> str:
     return COMPASS[(_sector(np.asarray(normal, float)[:2]) + 4) % 8][0]
 
 
+WALL_FIT_TOL = 0.01
+"""Metres: wall hits this far off the fitted line are kept (things hung on the wall stand off it
+by more, a scan's wall is flat to within it)."""
+
+
 def wall_frame(caster, position: np.ndarray, normal: np.ndarray, half_width: float = 0.4,
                samples: int = 17) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The wall behind a tag, fitted to the model: (3,) point on the surface behind the centre,
@@ -106,7 +111,9 @@ def wall_frame(caster, position: np.ndarray, normal: np.ndarray, half_width: flo
     Rays towards the wall from ``FRONT_OFFSET`` in front of it at ``samples`` points within
     ``half_width`` of the centre; a line fitted to the hits in xy gives the wall's direction (a
     scan's normal may be a few degrees off, which would make a 10 m probe drift into or away from
-    the wall). Falls back to ``normal`` when fewer than 3 rays hit.
+    the wall), refitted without the hits more than :data:`WALL_FIT_TOL` off it (a picture or a
+    socket beside the tag would tilt the line, and the tilted line would run into the wall and
+    be taken for a corner). Falls back to ``normal`` when fewer than 3 rays hit.
     """
     p = np.asarray(position, float)
     n = np.asarray(normal, float).copy()
@@ -119,12 +126,20 @@ def wall_frame(caster, position: np.ndarray, normal: np.ndarray, half_width: flo
     ok = np.isfinite(dist)
     if ok.sum() >= 3:
         pts = starts[ok, :2] - dist[ok, None] * n[None, :2]
-        centre = pts.mean(axis=0)
-        _, _, vt = np.linalg.svd(pts - centre)
+        keep = np.ones(len(pts), dtype=bool)
+        for _ in range(3):  # a picture or a switch beside the tag stands off the wall: fit without it
+            centre = pts[keep].mean(axis=0)
+            _, _, vt = np.linalg.svd(pts[keep] - centre)
+            off = np.abs((pts - centre) @ vt[1])
+            new_keep = off <= max(WALL_FIT_TOL, 2.5 * float(np.median(off[keep])))
+            if new_keep.sum() < 3 or np.array_equal(new_keep, keep):
+                break
+            keep = new_keep
         tan = vt[0] if np.dot(vt[0], t[:2]) >= 0 else -vt[0]
         t = np.array([tan[0], tan[1], 0.0])
         n = np.cross(t, [0.0, 0.0, 1.0])  # up x n = t  <=>  n = t x up
         n /= np.linalg.norm(n)
+        centre = pts[keep].mean(axis=0)
         along = float(np.dot(p[:2] - centre, t[:2]))
         on_wall = np.array([centre[0] + along * t[0], centre[1] + along * t[1], p[2]])
     else:
