@@ -143,6 +143,8 @@ class RunFolder:
                     continue  # a line torn by a crash
                 if op in ("+f", "-f", "+d", "-d") and isinstance(rel, str):
                     self._apply(op, rel)
+        self.files = {f for f in self.files if os.path.lexists(self.real / f)}  # a claim on nothing is dropped
+        self.dirs = {d for d in self.dirs if os.path.isdir(self.real / d)}
         tmp = self.real / f".{MANIFEST}.{os.getpid()}"
         try:
             with open(tmp, "w") as fh:
@@ -174,10 +176,10 @@ class RunFolder:
         return here
 
     def prepare_write(self, rel: str) -> Path:
+        if rel in BOOKKEEPING or rel == "":
+            raise UserError(f"{self.option} {self.path}: {rel or 'the folder'} is not a file markerplace writes")
         target = self._checked(rel)
         self.make_dirs(os.path.dirname(rel))
-        if rel in BOOKKEEPING:
-            raise UserError(f"{self.option} {self.path}: {rel} is markerplace's own bookkeeping file")
         if os.path.lexists(target):
             if target.is_dir() and not target.is_symlink():
                 raise UserError(f"{self.option} {self.path}: {rel} is a folder where markerplace writes a file: move "
@@ -258,8 +260,9 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
         raise UserError(f"{option} {given} is a symbolic link to {os.readlink(given)}, which does not exist: give a "
                         "real folder or fix the link")
     real = os.path.realpath(given)
+    marked = os.path.isfile(os.path.join(real, MARKER)) and not os.path.islink(os.path.join(real, MARKER))
     for place, what in _refused_places():
-        if real == place:
+        if real == place and not (marked and "working directory" in what):  # `check .` in a plan folder
             raise UserError(f"{option} {given} is {what}; markerplace writes a run into a folder of its own: give a "
                             "new folder, e.g. {}".format(os.path.join(str(given), "markerplace_run")))
     owner = find(given)
@@ -267,7 +270,6 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
         return owner
     if given.exists() and given.is_dir():
         names = set(os.listdir(given)) - set(BOOKKEEPING)
-        marked = (given / MARKER).is_file() and not (given / MARKER).is_symlink()
         if names and not marked and not adopt:
             raise UserError(f"{option} {given} is not empty and was not made by markerplace (no {MARKER}): give a new "
                             "or empty folder, or pass --adopt to add the run's files to it (the files already there "
