@@ -283,6 +283,34 @@ def test_similarity_is_recomputed_when_the_observations_change(copy_of):
     assert not np.array_equal(new, old)
 
 
+def test_a_stage_with_upstream_artifacts_reruns_when_they_change(tmp_path):
+    from markerplace.io_utils import write_json
+    from markerplace.runtime import cache
+    from markerplace.runtime.stages import cached
+
+    upstream, out = tmp_path / "map.json", tmp_path / "model.json"
+    calls = []
+
+    def fit():
+        if not upstream.exists():  # the stage makes its upstream artifact itself
+            write_json(upstream, {"map": 1})
+            cache.mark_done(upstream, "map-key")
+        calls.append(json.loads(upstream.read_text()))
+        return calls[-1]
+
+    def run():
+        return cached("fit", out, "model-key", fit, lambda r, p: write_json(p, r), lambda p: json.loads(p.read_text()),
+                      upstream=[upstream])
+
+    assert run() == {"map": 1} and run() == {"map": 1} and len(calls) == 1  # reused while the map is the same
+    write_json(upstream, {"map": 2})  # the upstream stage recomputed with other bytes
+    cache.mark_done(upstream, "map-key")
+    assert run() == {"map": 2} and len(calls) == 2
+    upstream.unlink()  # an upstream cache deleted: the model still stands
+    (tmp_path / "map.json.meta.json").unlink()
+    assert run() == {"map": 2} and len(calls) == 2
+
+
 # --- full disk, unwritable paths ------------------------------------------------------------------
 
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EACCES, errno.EROFS])

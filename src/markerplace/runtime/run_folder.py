@@ -65,13 +65,16 @@ def _links_inside(root: str) -> str | None:
     """The first symbolic link to a folder, or dangling, below ``root`` (links are not followed)."""
     stack = [root]
     while stack:
-        with os.scandir(stack.pop()) as it:
-            for entry in it:
-                if entry.is_symlink():
-                    if not os.path.isfile(entry.path):
-                        return entry.path
-                elif entry.is_dir(follow_symlinks=False):
-                    stack.append(entry.path)
+        try:
+            with os.scandir(stack.pop()) as it:
+                for entry in it:
+                    if entry.is_symlink():
+                        if not os.path.isfile(entry.path):
+                            return entry.path
+                    elif entry.is_dir(follow_symlinks=False):
+                        stack.append(entry.path)
+        except OSError:
+            continue  # a folder that cannot be read: nothing is written there either
     return None
 
 
@@ -122,7 +125,8 @@ class RunFolder:
                          "folder")
 
     def _apply(self, op: str, rel: str) -> None:
-        (self.files if op[1] == "f" else self.dirs).__getattribute__("add" if op[0] == "+" else "discard")(rel)
+        group = self.files if op[1] == "f" else self.dirs
+        group.add(rel) if op[0] == "+" else group.discard(rel)
 
     def _record(self, op: str, rel: str) -> None:
         with _guard:
@@ -132,6 +136,26 @@ class RunFolder:
             except OSError as err:
                 raise write_error(self.real / MANIFEST, err) from None
             self._apply(op, rel)
+
+    def _mark(self, command: str) -> None:
+        """Write the marker when the folder has none (made now, empty, or adopted)."""
+        marker = self.real / MARKER
+        if marker.is_file() and not marker.is_symlink():
+            return
+        foreign = len(set(os.listdir(self.real)) - set(BOOKKEEPING))
+        from .. import __version__
+
+        text = json.dumps({"markerplace_run": 1, "version": __version__, "command": command, "adopted": bool(foreign),
+                           "created": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n"
+        tmp = self.real / f".{MARKER}.{os.getpid()}"
+        try:
+            tmp.write_text(text)
+            os.replace(tmp, marker)
+        except OSError as err:
+            tmp.unlink(missing_ok=True)
+            raise write_error(marker, err) from None
+        if foreign:
+            log.info("%s: adopted; the %d entries already in it are left alone", self.path, foreign)
 
     def _load_manifest(self) -> None:
         path = self.real / MANIFEST
@@ -269,44 +293,28 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
     if owner is not None:
         return owner
     if given.exists() and given.is_dir():
-        names = set(os.listdir(given)) - set(BOOKKEEPING)
+        try:
+            names = set(os.listdir(given)) - set(BOOKKEEPING)
+        except OSError as err:
+            raise UserError(f"{option} {given}: cannot read the folder ({err.strerror}); choose another") from None
         if names and not marked and not adopt:
             raise UserError(f"{option} {given} is not empty and was not made by markerplace (no {MARKER}): give a new "
                             "or empty folder, or pass --adopt to add the run's files to it (the files already there "
                             "are never replaced or deleted)")
-    folder = RunFolder(given, option)
-    if given.is_dir():
-        link = _links_inside(real)
-        if link is not None:
-            raise folder._link_error(Path(link))
+    link = _links_inside(real) if given.is_dir() else None
+    if link is not None:
+        raise RunFolder(given, option)._link_error(Path(link))
     check_output_dir(given, option)
-    if not given.exists():
-        missing = [p for p in (given, *given.parents) if not os.path.lexists(p)]
-        try:
-            given.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise write_error(given, err) from None
-        folder._made = [Path(os.path.abspath(p)) for p in reversed(missing)]
-        folder.real = Path(os.path.realpath(given))
-        folder.lock = RunLock(folder.real / LOCK, folder.lock.what)
+    made = [Path(os.path.abspath(p)) for p in (given, *given.parents) if not os.path.lexists(p)][::-1]
+    try:
+        given.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise write_error(given, err) from None
+    folder = RunFolder(given, option)
+    folder._made = made
     try:
         folder.lock.acquire(command)
-        marker = folder.real / MARKER
-        if not marker.is_file() or marker.is_symlink():
-            adopted = bool(set(os.listdir(folder.real)) - set(BOOKKEEPING))
-            from .. import __version__
-
-            text = json.dumps({"markerplace_run": 1, "version": __version__, "command": command, "adopted": adopted,
-                               "created": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n"
-            try:
-                tmp = folder.real / f".{MARKER}.{os.getpid()}"
-                tmp.write_text(text)
-                os.replace(tmp, marker)
-            except OSError as err:
-                raise write_error(marker, err) from None
-            if adopted:
-                log.info("%s: adopted (%d entries already in it are left alone)", folder.path,
-                         len(set(os.listdir(folder.real)) - set(BOOKKEEPING)))
+        folder._mark(command)
         folder._load_manifest()
     except BaseException:
         folder.close()
@@ -323,12 +331,8 @@ def close_all() -> None:
 
 def find(path) -> RunFolder | None:
     """The innermost open run folder holding ``path``, or None."""
-    best = None
-    for folder in _open:
-        rel = folder.relative(path)
-        if rel is not None and (best is None or len(str(folder.path)) > len(str(best[0].path))):
-            best = (folder, rel)
-    return best[0] if best else None
+    holding = (f for f in _open if f.relative(path) is not None)
+    return max(holding, key=lambda f: len(str(f.path)), default=None)
 
 
 def _mkdirs_outside(folder: Path) -> None:
@@ -384,15 +388,9 @@ def remove(path) -> bool:
 def remove_stale(folder, keep: Iterable, pattern: str = "*") -> list[Path]:
     """Delete the files markerplace wrote directly in ``folder`` whose names match ``pattern``
     and which are not in ``keep`` (an earlier run's outputs). Returns the deleted paths."""
-    folder = Path(folder)
-    keep_names = {Path(p).name for p in keep}
-    gone = []
-    if not folder.is_dir():
-        return gone
-    for p in sorted(folder.iterdir()):
-        if p.name not in keep_names and fnmatch.fnmatchcase(p.name, pattern) and remove(p):
-            gone.append(p)
-    return gone
+    folder, keep_names = Path(folder), {Path(p).name for p in keep}
+    present = sorted(folder.iterdir()) if folder.is_dir() else []
+    return [p for p in present if p.name not in keep_names and fnmatch.fnmatchcase(p.name, pattern) and remove(p)]
 
 
 def remove_tree(path) -> None:

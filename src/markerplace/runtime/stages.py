@@ -17,8 +17,8 @@ every one of them that exists still has the recorded digest.
 from __future__ import annotations
 
 import logging
-import time
 import os
+import time
 from pathlib import Path
 from typing import Callable, Sequence, TypeVar
 
