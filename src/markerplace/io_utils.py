@@ -1,13 +1,20 @@
 """Atomic file writes: a crash never leaves a half-written artifact behind; clean numbers in them.
 
+Every write goes through :func:`atomic_path`: inside a run folder it only writes where
+:mod:`markerplace.runtime.run_folder` allows (never through a link, never over a file
+markerplace did not write) and records the file in the folder's manifest. A write that fails on
+a full disk, a quota, a read-only file system or a permission is one line
+(:func:`markerplace.errors.write_error`, exit 2) and leaves no temporary file.
+
 Every JSON file the tool writes goes through :func:`write_json`, which writes floats rounded to
 :data:`JSON_DIGITS` significant digits (or 9 decimals, when finer) and never ``-0.0``
-(:func:`clean_numbers`): ``11.1``, not ``11.100000000000001``. Text tables and messages format numbers with :func:`fixed` (no
-``-0.000``).
+(:func:`clean_numbers`): ``11.1``, not ``11.100000000000001``. Text tables and messages format
+numbers with :func:`fixed` (no ``-0.000``).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -18,21 +25,34 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .errors import write_error
+from .runtime import run_folder
+
 
 @contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; rename it onto ``path`` only if the block succeeds."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    """Yield a temporary path next to ``path``; rename it onto ``path`` only if the block succeeds.
+
+    Raises:
+        UserError: ``path`` is in a run folder where markerplace may not write it (see
+            :func:`markerplace.runtime.run_folder.prepare_write`), or the write failed for lack
+            of space or permission.
+    """
+    path = run_folder.prepare_write(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    except OSError as err:
+        raise write_error(path, err) from None
     os.close(fd)
     tmp_path = Path(tmp)
     umask = os.umask(0)
     os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give outputs the usual permissions
     try:
+        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give outputs the usual permissions
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as err:
+        raise write_error(path, err) from None
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
@@ -120,6 +140,20 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
 
     with atomic_path(path) as tmp:
         Image.fromarray(np.ascontiguousarray(image)).save(tmp, format="PNG")
+
+
+def allocate(path: str | os.PathLike) -> None:
+    """Reserve disk blocks for the whole of the file ``path`` (a new memory map is sparse: a
+    full disk would otherwise kill the process with SIGBUS while the map is filled); a full
+    disk raises ``OSError(ENOSPC)`` here instead. No-op where the file system cannot."""
+    size = os.path.getsize(path)
+    if size and hasattr(os, "posix_fallocate"):
+        with open(path, "r+b") as fh:
+            try:
+                os.posix_fallocate(fh.fileno(), 0, size)
+            except OSError as err:
+                if err.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                    raise
 
 
 def _json_default(obj: Any) -> Any:

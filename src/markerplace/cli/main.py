@@ -85,7 +85,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..plan.placement import check_k
     from ..plan.planner import first_pick_gain, place, prepare, validate
     from ..report.plan_outputs import write_plan_outputs
-    from ..output_checks import check_output_dir
+    from ..runtime.run_folder import open_run_folder
     from ..scene.worldframe import markers_to_internal, world_offset
 
     config = plan_config_from_args(args)
@@ -96,7 +96,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing) if args.existing else []
-    check_output_dir(args.out)
+    open_run_folder(args.out, "plan", adopt=args.adopt)  # marked, locked; released by main()
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
     offset = world_offset(scene)  # user inputs and outputs are in the file's frame
@@ -232,7 +232,12 @@ def main(argv: list[str] | None = None) -> int:
         from ..validation import check_args
 
         check_args(args)  # every numeric option of every subcommand: finite and in range
-        return int(func(args) or 0)
+        try:
+            return int(func(args) or 0)
+        finally:
+            from ..runtime.run_folder import close_all
+
+            close_all()  # unlock the run folders; one the run wrote nothing into is left as found
     except UserError as err:
         print(f"markerplace: error: {err}", file=sys.stderr)
         return err.exit_code

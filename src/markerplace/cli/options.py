@@ -16,7 +16,7 @@ from typing import Sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_level", "parse_xy", "plan_config_from_args",
            "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
 
 
@@ -142,4 +142,13 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--force", action="store_true",
                    help="run even when the size guard estimates more poses, memory or time than the limits "
                         "(200,000 poses, 80%% of this machine's memory, 12 h)")
+    add_adopt_arg(p)
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
+
+
+def add_adopt_arg(p: argparse.ArgumentParser) -> None:
+    """``--adopt``: write a run into a non-empty folder markerplace did not make
+    (:mod:`markerplace.runtime.run_folder`)."""
+    p.add_argument("--adopt", action="store_true",
+                   help="use a non-empty --out folder that markerplace did not make: its run files are added, the "
+                        "files already there are never replaced or deleted (default: such a folder is refused)")

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..io_utils import atomic_path, fixed, write_json
+from ..runtime import run_folder
 
 log = logging.getLogger(__name__)
 
@@ -87,9 +88,12 @@ def _warn_off_wall(scene, markers) -> None:
 
 
 def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
-              radius: float | None = None, workers: int = 1, progress: bool = True) -> tuple[Path, str]:
+              radius: float | None = None, workers: int = 1, progress: bool = True,
+              adopt: bool = False) -> tuple[Path, str]:
     """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
-    (default ``plan_dir/check``). Returns the folder and the text summary printed by the CLI."""
+    (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
+    not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
+    folder and the text summary printed by the CLI."""
     from ..plan import check
     from ..plan.folder import read_plan_folder
     from ..plan.planner import prepare
@@ -99,9 +103,8 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     folder = read_plan_folder(plan_dir)
     installed_user = load_installed(installed_path, folder.config.placement.tag_size)
     out = Path(out_dir) if out_dir is not None else folder.path / "check"
-    from ..output_checks import check_output_dir
-
-    check_output_dir(out)
+    run_folder.open_run_folder(folder.path, "check", adopt=adopt, option="PLAN_DIR")  # its caches may be rewritten
+    run_folder.open_run_folder(out, "check", adopt=adopt)
     spec = folder.spec
     scene = spec.load()
     offset = world_offset(scene)
@@ -140,7 +143,7 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
     from .deliverables import write_known_tag_maps
     from .figures import floor_map, per_location_mean
 
-    out.mkdir(parents=True, exist_ok=True)
+    run_folder.make_dirs(out)
     disc = discretization_to_user(result.disc, offset)
     sp, si = result.score_planned, result.score_installed
     drop = sp - si

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..io_utils import atomic_path
 from ..render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
+from ..runtime import run_folder
 
 
 def tag_modules(tag_id: int) -> np.ndarray:
@@ -86,18 +87,17 @@ def caption_for(record: dict) -> list[str]:
 
 def write_tag_sheets(folder: str | Path, records: Sequence[dict]) -> list[Path]:
     """Write ``NN_tag<id>.svg`` for each marker record (see :func:`caption_for`), atomically;
-    SVGs of an earlier plan in ``folder`` that are not part of this one are removed.
+    SVGs an earlier plan wrote in ``folder`` that are not part of this one are removed (other
+    files are left alone: :func:`markerplace.runtime.run_folder.remove_stale`).
 
     Returns the written paths in placement order.
     """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for rec in records:
         path = folder / f"{rec['order']:02d}_tag{rec['tag_id']}.svg"
         with atomic_path(path) as tmp:
             tmp.write_text(tag_svg(rec["tag_id"], rec["size"], caption_for(rec)))
         paths.append(path)
-    for old in set(folder.glob("*.svg")) - set(paths):
-        old.unlink()
+    run_folder.remove_stale(folder, paths, "*.svg")
     return paths

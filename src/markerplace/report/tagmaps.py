@@ -267,7 +267,6 @@ def write_tag_maps(folder: str | Path, markers: Sequence, *, name: str, field: t
         The written paths.
     """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     size = float(markers[0].size) if len(markers) else 0.0
     frames = [("", markers, "the model frame: z up, metres, the user's coordinates (markerplace world)")]
     if world_from_file is not None and not np.allclose(world_from_file, np.eye(3)):
