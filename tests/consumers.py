@@ -88,6 +88,23 @@ def _inv(T: np.ndarray) -> np.ndarray:
 # The AprilTag C library's detections (pupil-apriltags), as the ROS nodes and TagSLAM receive them
 # ------------------------------------------------------------------------------------------------
 
+_PUPIL_DETECTORS: dict = {}
+
+
+def _pupil_detector(quad_decimate: float):
+    """One pupil-apriltags detector per setting, kept for the process. pupil-apriltags 1.0.4
+    crashes the process when a Detector is destroyed (it frees the tag families before the
+    detector that still reads them: pupil-labs/apriltags PR #65), so the detector comes from
+    markerplace's ``make_detector``, which is pupil-apriltags' class with only its destructor
+    fixed; every setting here is the consumers' own."""
+    if quad_decimate not in _PUPIL_DETECTORS:
+        from markerplace.localization.tags import make_detector  # the destructor fix only
+
+        _PUPIL_DETECTORS[quad_decimate] = make_detector(families="tag36h11", nthreads=1, quad_decimate=quad_decimate,
+                                                        quad_sigma=0.0, refine_edges=1, decode_sharpening=0.25)
+    return _PUPIL_DETECTORS[quad_decimate]
+
+
 def apriltag_detections(image: np.ndarray, *, quad_decimate: float = 1.0, max_hamming: int = 0) -> list[dict]:
     """tag36h11 detections of the AprilTag C library (pupil-apriltags) in ``image``.
 
@@ -96,10 +113,7 @@ def apriltag_detections(image: np.ndarray, *, quad_decimate: float = 1.0, max_ha
     counter-clockwise from the tag's bottom-left as printed: BL, BR, TR, TL), ``H`` (3, 3) = the
     library's homography from tag coordinates ((-1, -1)..(1, 1), y down) to pixels.
     """
-    from pupil_apriltags import Detector
-
-    det = Detector(families="tag36h11", nthreads=1, quad_decimate=quad_decimate, quad_sigma=0.0,
-                   refine_edges=1, decode_sharpening=0.25)
+    det = _pupil_detector(float(quad_decimate))
     out = []
     for d in det.detect(np.ascontiguousarray(image, dtype=np.uint8)):
         if d.hamming > max_hamming:
