@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from .. import __version__
 from ..errors import UserError
@@ -96,6 +97,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing) if args.existing else []
+    from ..plan.exclusion import load_exclusion
+
+    exclusion = load_exclusion(args.exclude) if args.exclude else None
+    previous = _previous_placement(args.out, args.scene)  # to say what this run changes
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
@@ -111,12 +116,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
+    if exclusion is not None:
+        data = _exclude(data, exclusion, offset, config.placement.k)
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
                                  method=config.placement.method, scene_source=args.scene, existing=existing,
                                  world_offset=offset, paper=args.paper,
-                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed})
+                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed},
+                                 exclusion=exclusion)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
@@ -126,7 +134,48 @@ def cmd_plan(args: argparse.Namespace) -> int:
     report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     print(f"wrote {report}")
+    if previous is not None:
+        from ..plan.exclusion import describe_changes, placement_changes
+
+        for line in describe_changes(placement_changes(previous, _previous_placement(args.out, args.scene) or [])):
+            print(line)
     return 0
+
+
+def _exclude(data, exclusion, offset, k: int):
+    """``data`` without the candidates ``--exclude`` names (user frame: ``offset`` moves the
+    internal candidates there); logs how many, and refuses one that leaves fewer than ``k``."""
+    from ..plan.exclusion import exclude_candidates, excluded
+    from ..scene.worldframe import points_to_user
+
+    drop = excluded(exclusion, points_to_user(data.disc.candidate_position, offset))
+    log.info("plan: --exclude %s (%d spots, %d boxes) removes %d of %d candidates", exclusion.source,
+             len(exclusion.spots), len(exclusion.boxes), int(drop.sum()), data.num_candidates)
+    if not drop.any():
+        log.warning("--exclude %s matches no candidate spot (check its coordinates are the model's, as in "
+                    "placement.json)", exclusion.source)
+    if data.num_candidates - int(drop.sum()) < k:
+        raise UserError(f"--exclude {exclusion.source} leaves {data.num_candidates - int(drop.sum())} candidate spots, "
+                        f"fewer than -k {k}; exclude less or lower -k")
+    return exclude_candidates(data, drop)
+
+
+def _previous_placement(out, scene: str) -> list | None:
+    """The markers of ``out/placement.json`` when it is a plan of ``scene`` (None: none,
+    another scene's, or unreadable)."""
+    import json
+
+    path = Path(out) / "placement.json"
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+        markers = doc.get("markers") if doc.get("scene") == scene else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    ok = isinstance(markers, list) and all(isinstance(m, dict) and {"position", "order", "tag_id"} <= set(m)
+                                           for m in markers)
+    return markers if ok else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -168,6 +217,10 @@ def build_parser() -> argparse.ArgumentParser:
     p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
                         help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
+    p_plan.add_argument("--exclude", default=None, metavar="FILE",
+                        help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
+                             "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
+                             "placing, so a re-run reuses every cached stage (see docs/cli.md)")
     from ..report.pdf import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,

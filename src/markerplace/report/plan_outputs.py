@@ -21,11 +21,19 @@ log = logging.getLogger(__name__)
 CSV_COLUMNS = ["order", "tag_id", "family", "size_m", "x", "y", "z", "normal_x", "normal_y", "normal_z", "yaw_deg", "gain"]
 
 
-def placement_records(placement, method: str) -> list[dict]:
-    """One JSON-ready dict per placed marker, in placement order."""
+def placement_records(placement, method: str, disc=None) -> list[dict]:
+    """One JSON-ready dict per placed marker, in placement order.
+
+    With the run's :class:`~markerplace.plan.discretization.Discretization` ``disc``, each
+    record says what the tag is on: ``surface`` (``"wall"``, ``"column"``, or for a category
+    ``--allow`` allowed e.g. ``"bookshelf front"``) and ``surface_part`` (the mesh part's name).
+    """
     rows = []
     for i, (m, c, g) in enumerate(zip(placement.markers, placement.candidates, placement.gains)):
         n = m.normal
+        on = {}
+        if disc is not None:
+            on = {"surface": str(disc.candidate_surface[int(c)]), "surface_part": str(disc.candidate_part[int(c)])}
         rows.append({
             "order": i + 1,
             "tag_id": int(m.tag_id),
@@ -38,14 +46,15 @@ def placement_records(placement, method: str) -> list[dict]:
             "gain": None if not np.isfinite(g) else float(g),
             "candidate_index": int(c),
             "method": method,
+            **on,
         })
     return rows
 
 
-def write_placement(out_dir: Path, placement, method: str, scene_source: str, extra: dict) -> None:
+def write_placement(out_dir: Path, placement, method: str, scene_source: str, extra: dict, disc=None) -> None:
     """placement.json (markers + summary), placement.csv (one row per marker) and tags/ (one
-    print-ready SVG per marker)."""
-    records = placement_records(placement, method)
+    print-ready SVG per marker); ``disc`` as :func:`placement_records`."""
+    records = placement_records(placement, method, disc)
     write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": records})
     buf = io.StringIO()
     writer = csv.writer(buf)
@@ -60,13 +69,14 @@ def write_placement(out_dir: Path, placement, method: str, scene_source: str, ex
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
                        scene_source: str, existing: Sequence = (), world_offset=None, paper: str = "a4",
-                       scene_options: dict | None = None) -> dict:
+                       scene_options: dict | None = None, exclusion=None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
 
     ``paper`` sets tags.pdf's paper (:mod:`markerplace.report.pdf`); ``scene_options`` (``up``,
     ``unit_scale``, ``seed`` of the scene argument) go into config.json with the existing markers,
     so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
-    (:mod:`markerplace.report.deliverables`).
+    (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
+    :class:`~markerplace.plan.exclusion.Exclusion`, user frame) goes there too.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -100,16 +110,17 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "planned_storeys": [int(s) for s in disc.planned_storeys],
         "discretization": disc.summary,
     }
-    write_placement(out_dir, placement, method, scene_source, {"summary": summary})
+    write_placement(out_dir, placement, method, scene_source, {"summary": summary}, disc)
     from .deliverables import write_deliverables
 
-    write_deliverables(out_dir, placement_records(placement, method), placement.markers, existing, disc, scene_source,
+    write_deliverables(out_dir, placement_records(placement, method, disc), placement.markers, existing, disc, scene_source,
                        scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
     write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config), "scene_options": scene_options or {},
-                                         "existing_markers": [m.to_json() for m in existing]})
+                                         "existing_markers": [m.to_json() for m in existing],
+                                         "exclude": None if exclusion is None else exclusion.to_json()})
 
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
     eye = disc.storeys[disc.planned_storeys] + config.discretize.height
