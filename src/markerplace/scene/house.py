@@ -43,8 +43,9 @@ from :func:`markerplace.scene.procedural.add_layout`, one :class:`Layout` per st
 * ``sunken_room``: name of the sunken room (``"living"``); ``sunken_floor_z`` (-0.25);
   ``sunken_opening``: the open side towards it, ``{"rooms", "orient", "line", "span",
   "step_height"}`` (``orient`` ``"h"``: a wall along x at y = ``line``; ``span``: its x extent).
-* ``glass_parts``: names of the transparent parts; ``glass_wall``: ``{"rooms", "orient",
-  "line", "span", "z"}`` of the glazed opening (``z``: bottom and top of the glass).
+* ``glass_parts``: names of the transparent parts (the glass wall's, the windows' and the glass
+  door's); ``glass_wall``: ``{"rooms", "orient", "line", "span", "z", "parts"}`` of the glazed
+  opening (``z``: bottom and top of the glass; ``parts``: its transparent parts).
 * ``narrow_door_room``: the room reached only through a narrow doorway (``"bathroom"``);
   ``narrow_door``: ``{"rooms", "orient", "line", "span", "width", "floor_z", "height"}``.
 * ``stair``: ``{"x", "y", "bottom_z", "top_z", "risers", "rise", "going", "up"}`` (``up``: the
@@ -382,7 +383,8 @@ def build_house(seed: int = 0) -> Scene:
         "sunken_opening": {"rooms": ["kitchen", "living"], "orient": s_or, "line": s_line, "span": [s0, s1], "step_height": SUNKEN},
         "glass_parts": [p.name for p in parts if p.transparent],
         "glass_wall": {"rooms": ["living", "sunroom"], "orient": g_or, "line": g_line, "span": [g0, g1],
-                       "z": [round(ground.floor_z + FRAME, 6), round(ground.floor_z + CEILING_HEIGHT - FRAME, 6)]},
+                       "z": [round(ground.floor_z + FRAME, 6), round(ground.floor_z + CEILING_HEIGHT - FRAME, 6)],
+                       "parts": [p.name for p in parts if p.transparent and "glazing" in p.names]},
         "narrow_door_room": "bathroom",
         "narrow_door": {"rooms": ["bathroom", "landing"], "orient": n_or, "line": n_line, "span": [n0, n1],
                         "width": narrow.width, "floor_z": upper.floor_z, "height": narrow.height},
