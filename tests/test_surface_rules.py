@@ -244,3 +244,43 @@ def test_house_without_names_keeps_tags_off_by_geometry_and_glass():
 def test_categories_are_the_documented_ones():
     assert list(ALLOWABLE)[:len(CATEGORIES)] == list(CATEGORIES)
     assert set(ALLOWABLE) - set(CATEGORIES) == {"off-wall", "in-opening"}
+
+
+# ---------------------------------------------------------------- names read from files
+
+
+def test_loader_keeps_node_parent_mesh_and_material_names(tmp_path):
+    """A glTF as artists export it: a ``RoomWindow_3`` group holding a mesh ``Cube.012`` with a
+    ``Material.005``; the window is known by its parent node. A PLY's own file name says nothing."""
+    import trimesh
+
+    from markerplace.scene.loader import load_mesh_file
+
+    scene = trimesh.Scene()
+    scene.graph.update(frame_from="world", frame_to="RoomWindow_3")
+    panel = trimesh.creation.box(extents=(1.2, 0.05, 1.2))
+    panel.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(name="Material.005"))
+    scene.add_geometry(panel, node_name="Cube.012_node", geom_name="Cube.012", parent_node_name="RoomWindow_3")
+    wall = trimesh.creation.box(extents=(4.0, 0.1, 2.7))
+    wall.apply_translation((0.0, 1.0, 0.0))
+    scene.add_geometry(wall, node_name="Wall_North", geom_name="Cube.013")
+    scene.export(tmp_path / "house.glb")
+    parts = {p.name: p for p in load_mesh_file(tmp_path / "house.glb").parts}
+    assert "RoomWindow_3" in parts["Cube.012"].names and "Material.005" in parts["Cube.012"].names
+    assert classify(parts["Cube.012"].names).category == "windows"
+    assert classify(parts["Cube.013"].names).category == "structure"
+    trimesh.creation.box(extents=(3.0, 3.0, 3.0)).export(tmp_path / "window_scan.ply")
+    (part,) = load_mesh_file(tmp_path / "window_scan.ply").parts
+    assert classify(part.names).category == ""
+
+
+def test_builtin_labels_survive_gltf_export(tmp_path):
+    from markerplace.scene.export import export_glb
+    from markerplace.scene.loader import load_mesh_file
+
+    room = load_scene("room")
+    export_glb(room, tmp_path / "room.glb")
+    back = {p.name: p for p in load_mesh_file(tmp_path / "room.glb").parts}
+    for p in room.parts:
+        assert classify(back[p.name].names).category == classify(p.names).category, p.name
+    assert {classify(p.names).category for p in room.parts} >= {"structure", "furniture", "pictures", "screens"}

@@ -213,9 +213,10 @@ def surface_shape(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, floor
 
     Returns:
         ``off-wall`` (M,) bool: going up, the surface ends below the ceiling with a surface
-        behind it (or nothing), and that stays so up to the ceiling (a picture or a cupboard in
-        front of a wall; the side of a fridge), or the surface also ends so on its left, right
-        or lower side (a picture on a wall under a lower ceiling part); ``in-opening`` (M,) bool:
+        behind it, and that stays so up to the ceiling (a picture or a cupboard in front of a
+        wall) or the surface also ends so on its left, right or lower side (a picture on a wall
+        under a lower ceiling part); or, under a ceiling, it ends going up with nothing behind
+        it up to the ceiling (the side of a fridge; not a wall of a roofless scan); ``in-opening`` (M,) bool:
         going up, left and right it ends at surfaces in front of it (a door leaf in its
         opening); ``column`` (M,) bool: it reaches the ceiling, ends on both sides with surfaces
         behind it and is narrower than 1.2 m.
@@ -242,7 +243,11 @@ def surface_shape(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, floor
 
     top_, low = profile(up, top), profile(-up, bottom)
     left, right = profile(-x, np.full(M, config.side_reach)), profile(x, np.full(M, config.side_reach))
-    off_wall = top_["away"] & (top_["end_away"] | left["deeper"] | right["deeper"] | low["deeper"])
+    # a surface with the wall behind its top edge; or, under a ceiling, one that ends in mid-air
+    # (a roofless scan's walls end with nothing above them: still walls)
+    roofed = np.isfinite(t_up)
+    off_wall = ((top_["deeper"] & (top_["end_away"] | left["deeper"] | right["deeper"] | low["deeper"]))
+                | (roofed & top_["away"] & top_["end_away"]))
     in_opening = top_["shallower"] & left["shallower"] & right["shallower"]
     column = top_["reached"] & left["deeper"] & right["deeper"] & (left["run"] + right["run"] < 1.2)
     return {"off-wall": off_wall, "in-opening": in_opening, "column": column}
