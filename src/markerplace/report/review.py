@@ -69,8 +69,8 @@ def reject_button(record: dict) -> str:
     return (f'<p><button type="button" class="mp-reject" data-order="{int(record["order"])}" '
             f'data-tag="{int(record["tag_id"])}" data-x="{x:.4f}" data-y="{y:.4f}" data-z="{z:.4f}" '
             f'data-radius="{radius:g}" data-note="{esc(note)}">Reject this spot</button> '
-            "<span class=\"note\">(a door that opens over it, a wall to be painted, ...: adds it to the file "
-            "below)</span></p>")
+            "<span class=\"note\">(a door that opens over it, a wall to be painted, ...: adds it to "
+            "<code>rejected.json</code>, see <i>Review</i> above the tags)</span></p>")
 
 
 def review_box(scene: str, out_dir: str = "PLAN_DIR") -> str:
@@ -83,6 +83,6 @@ def review_box(scene: str, out_dir: str = "PLAN_DIR") -> str:
             "are reused, so it takes seconds, and the run prints which tags changed:</p>"
             f'<p><a id="mp-rejected-download" class="mp-download" download="rejected.json" '
             f'data-scene="{esc(scene)}" href="data:application/json;charset=utf-8,{esc(quote(empty))}" '
-            'aria-disabled="true">Download rejected.json</a> (<span id="mp-rejected-count">0</span> spots rejected)</p>'
+            'aria-disabled="true">Download rejected.json</a> (spots rejected: <span id="mp-rejected-count">0</span>)</p>'
             f"<p><code>markerplace plan {esc(scene)} --out {esc(out_dir)} --exclude rejected.json</code> "
             "(with the options of the first run)</p></div>")
