@@ -119,3 +119,25 @@ def test_exclude_that_leaves_too_few_candidates_is_refused(tiny_run, tmp_path, c
     assert main(["plan", "tiny", "-k", "3", "--out", str(tiny_run), "--exclude", str(path), *FAST]) == 2
     assert "fewer than -k 3" in capsys.readouterr().err
 
+
+
+def test_exclusion_masks_candidates_and_the_calibrations_coverages(tiny_run):
+    """exclude_candidates keeps the candidate arrays, coverages, visibility and a calibrated
+    method's coverages aligned (existing markers stay at the end)."""
+    from markerplace.plan.exclusion import exclude_candidates
+    from markerplace.plan.folder import read_plan_folder
+    from markerplace.plan.planner import prepare
+
+    folder = read_plan_folder(tiny_run)
+    data = prepare(folder.spec, folder.config, tiny_run, progress=False)  # every stage cached
+    C = data.num_candidates
+    data.calibration["fake"] = {"model": None, "coverages": list(data.coverages)}
+    drop = np.zeros(C, bool)
+    drop[[0, C - 1]] = True
+    out = exclude_candidates(data, drop)
+    keep = np.flatnonzero(~drop)
+    assert out.num_candidates == C - 2 == len(out.disc.candidate_position) == len(out.disc.candidate_surface)
+    assert [c.pose_idx.tolist() for c in out.coverages] == [data.coverages[i].pose_idx.tolist() for i in keep]
+    assert out.calibration["fake"]["coverages"] == out.coverages
+    assert np.array_equal(out.visible, data.visible[:, keep])
+    assert np.array_equal(out.disc.candidate_position, data.disc.candidate_position[keep])

@@ -284,3 +284,13 @@ def test_builtin_labels_survive_gltf_export(tmp_path):
     for p in room.parts:
         assert classify(back[p.name].names).category == classify(p.names).category, p.name
     assert {classify(p.names).category for p in room.parts} >= {"structure", "furniture", "pictures", "screens"}
+
+
+def test_allow_on_the_command_line(capsys):
+    from markerplace.cli.main import main
+    from markerplace.cli.options import parse_allow
+
+    assert parse_allow("Furniture, doors,furniture") == ("furniture", "doors") and parse_allow("none") == ()
+    assert main(["plan", "tiny", "--allow", "furniture,sofas", "--out", "unused", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("markerplace: error: --allow") and "'sofas'" in err[0]
