@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from pathlib import Path
 
 from .. import __version__
 from ..errors import UserError
@@ -97,10 +96,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing) if args.existing else []
-    from ..plan.exclusion import load_exclusion
+    from ..plan.exclusion import apply_exclusion, load_exclusion, previous_markers
 
     exclusion = load_exclusion(args.exclude) if args.exclude else None
-    previous = _previous_placement(args.out, args.scene)  # to say what this run changes
+    previous = previous_markers(args.out, args.scene)  # to say what this run changes
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
@@ -117,7 +116,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     if exclusion is not None:
-        data = _exclude(data, exclusion, offset, config.placement.k)
+        data = apply_exclusion(data, exclusion, offset, config.placement.k)
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
@@ -137,45 +136,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if previous is not None:
         from ..plan.exclusion import describe_changes, placement_changes
 
-        for line in describe_changes(placement_changes(previous, _previous_placement(args.out, args.scene) or [])):
+        for line in describe_changes(placement_changes(previous, previous_markers(args.out, args.scene) or [])):
             print(line)
     return 0
-
-
-def _exclude(data, exclusion, offset, k: int):
-    """``data`` without the candidates ``--exclude`` names (user frame: ``offset`` moves the
-    internal candidates there); logs how many, and refuses one that leaves fewer than ``k``."""
-    from ..plan.exclusion import exclude_candidates, excluded
-    from ..scene.worldframe import points_to_user
-
-    drop = excluded(exclusion, points_to_user(data.disc.candidate_position, offset))
-    log.info("plan: --exclude %s (%d spots, %d boxes) removes %d of %d candidates", exclusion.source,
-             len(exclusion.spots), len(exclusion.boxes), int(drop.sum()), data.num_candidates)
-    if not drop.any():
-        log.warning("--exclude %s matches no candidate spot (check its coordinates are the model's, as in "
-                    "placement.json)", exclusion.source)
-    if data.num_candidates - int(drop.sum()) < k:
-        raise UserError(f"--exclude {exclusion.source} leaves {data.num_candidates - int(drop.sum())} candidate spots, "
-                        f"fewer than -k {k}; exclude less or lower -k")
-    return exclude_candidates(data, drop)
-
-
-def _previous_placement(out, scene: str) -> list | None:
-    """The markers of ``out/placement.json`` when it is a plan of ``scene`` (None: none,
-    another scene's, or unreadable)."""
-    import json
-
-    path = Path(out) / "placement.json"
-    if not path.is_file():
-        return None
-    try:
-        doc = json.loads(path.read_text())
-        markers = doc.get("markers") if doc.get("scene") == scene else None
-    except (OSError, ValueError, AttributeError):
-        return None
-    ok = isinstance(markers, list) and all(isinstance(m, dict) and {"position", "order", "tag_id"} <= set(m)
-                                           for m in markers)
-    return markers if ok else None
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -36,8 +36,8 @@ from ..errors import UserError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_RADIUS", "FORMAT", "Exclusion", "exclude_candidates", "excluded", "load_exclusion",
-           "placement_changes", "describe_changes"]
+__all__ = ["DEFAULT_RADIUS", "FORMAT", "Exclusion", "apply_exclusion", "exclude_candidates", "excluded",
+           "load_exclusion", "placement_changes", "previous_markers", "describe_changes"]
 
 FORMAT = "markerplace-exclude/1"
 DEFAULT_RADIUS = 0.3
@@ -170,6 +170,45 @@ def exclude_candidates(data, drop: np.ndarray):
                    marker_poses=None if data.marker_poses is None else data.marker_poses[keep],
                    marker_sizes=None if data.marker_sizes is None else data.marker_sizes[keep],
                    calibration=calibration)
+
+
+def apply_exclusion(data, exclusion: Exclusion, offset, k: int):
+    """``data`` (:class:`~markerplace.plan.planner.PlanData`, internal frame) without the
+    candidates ``exclusion`` (user frame) covers; ``offset`` (3,) is the scene's
+    :func:`~markerplace.scene.worldframe.world_offset`. Logs how many went.
+
+    Raises:
+        UserError: fewer than ``k`` candidates would be left.
+    """
+    from ..scene.worldframe import points_to_user
+
+    drop = excluded(exclusion, points_to_user(data.disc.candidate_position, offset))
+    left = data.num_candidates - int(drop.sum())
+    log.info("plan: --exclude %s (%d spots, %d boxes) removes %d of %d candidates", exclusion.source,
+             len(exclusion.spots), len(exclusion.boxes), int(drop.sum()), data.num_candidates)
+    if not drop.any():
+        log.warning("--exclude %s matches no candidate spot (check its coordinates are the model's, as in "
+                    "placement.json)", exclusion.source)
+    if left < k:
+        raise UserError(f"--exclude {exclusion.source} leaves {left} candidate spots, fewer than -k {k}; exclude "
+                        "less or lower -k")
+    return exclude_candidates(data, drop)
+
+
+def previous_markers(out: str | Path, scene: str) -> list | None:
+    """The marker records of ``out/placement.json`` when it is a plan of ``scene`` (None: no
+    file, another scene's, or unreadable)."""
+    path = Path(out) / "placement.json"
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+        markers = doc.get("markers") if doc.get("scene") == scene else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    ok = isinstance(markers, list) and all(isinstance(m, dict) and {"position", "order", "tag_id"} <= set(m)
+                                           for m in markers)
+    return markers if ok else None
 
 
 def placement_changes(old: list[dict], new: list[dict], same: float = 0.01, moved: float = 2.0) -> dict:
