@@ -184,10 +184,15 @@ def check_page(driver, path: Path) -> dict:
     return {"images": [alt for alt, *_ in images], "text": driver.find_element("tag name", "body").text}
 
 
-def test_plan_report_in_browser(tmp_path_factory, browser, capsys):
+@pytest.fixture(scope="module")
+def tiny_plan(tmp_path_factory):
     out = tmp_path_factory.mktemp("plan_report")
     assert main(["plan", "tiny", "-k", "2", "--out", str(out), *FAST]) == 0
-    assert f"wrote {out / 'report.html'}" in capsys.readouterr().out
+    return out
+
+
+def test_plan_report_in_browser(tiny_plan, browser):
+    out = tiny_plan
     page = check_page(browser, out / "report.html")
     alts = page["images"]
     assert {"placement.png", "scores.png"} <= set(alts)
@@ -196,6 +201,41 @@ def test_plan_report_in_browser(tmp_path_factory, browser, capsys):
     assert page["text"].count(" m above the floor (the middle of the black square") == 2
     assert re.search(r"\d\.\d\d m from the (corner|door edge|end of the wall) on the (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
+    assert page["text"].count("On the wall (model part tiny/wall/") == 2  # what each tag is on
+
+
+def test_reject_buttons_download_a_file_that_plan_exclude_accepts(tiny_plan, browser, tmp_path, capsys):
+    """Reject tag #1, reject and un-reject #2: the download link holds #1's spot only, and a
+    replan with it (from the cached stages) leaves that spot free."""
+    import json
+    import shutil
+    from urllib.parse import unquote
+
+    browser.get((tiny_plan / "report.html").resolve().as_uri())
+    buttons = browser.find_elements("css selector", "button.mp-reject")
+    assert len(buttons) == 2
+    link = browser.find_element("id", "mp-rejected-download")
+    assert link.get_attribute("aria-disabled") == "true"
+    buttons[0].click()
+    buttons[1].click()
+    buttons[1].click()
+    assert "Rejected" in buttons[0].text and buttons[1].text == "Reject this spot"
+    assert browser.find_element("id", "mp-rejected-count").text == "1"
+    href = link.get_attribute("href")
+    assert href.startswith("data:application/json") and link.get_attribute("download") == "rejected.json"
+    doc = json.loads(unquote(href.split(",", 1)[1]))
+    first = json.loads((tiny_plan / "placement.json").read_text())["markers"][0]
+    assert [s["order"] for s in doc["spots"]] == [1] and doc["scene"] == "tiny"
+    assert [doc["spots"][0][k] for k in "xyz"] == pytest.approx(first["position"])
+    rejected = tmp_path / "rejected.json"
+    rejected.write_text(json.dumps(doc))
+    replan = tmp_path / "replan"
+    shutil.copytree(tiny_plan, replan)
+    capsys.readouterr()
+    assert main(["plan", "tiny", "-k", "2", "--out", str(replan), "--exclude", str(rejected), *FAST]) == 0
+    assert "changes against the previous placement.json" in capsys.readouterr().out
+    after = json.loads((replan / "placement.json").read_text())["markers"]
+    assert all(np.linalg.norm(np.array(m["position"]) - first["position"]) > doc["spots"][0]["radius"] for m in after)
 
 
 def test_evaluate_report_in_browser(tmp_path_factory, browser):

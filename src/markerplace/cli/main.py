@@ -96,6 +96,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing) if args.existing else []
+    from ..plan.exclusion import apply_exclusion, load_exclusion, previous_markers
+
+    exclusion = load_exclusion(args.exclude) if args.exclude else None
+    previous = previous_markers(args.out, args.scene)  # to say what this run changes
     open_run_folder(args.out, "plan", adopt=args.adopt)  # marked, locked; released by main()
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
@@ -111,12 +115,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
+    if exclusion is not None:
+        data = apply_exclusion(data, exclusion, offset, config.placement.k)
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
                                  method=config.placement.method, scene_source=args.scene, scene=scene, existing=existing,
                                  world_offset=offset, paper=args.paper,
-                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed})
+                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed},
+                                 exclusion=exclusion)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
@@ -126,6 +133,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     print(f"wrote {report}")
+    if previous is not None:
+        from ..plan.exclusion import describe_changes, placement_changes
+
+        for line in describe_changes(placement_changes(previous, previous_markers(args.out, args.scene) or [])):
+            print(line)
     return 0
 
 
@@ -168,6 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
     p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
                         help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
+    p_plan.add_argument("--exclude", default=None, metavar="FILE",
+                        help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
+                             "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
+                             "placing, so a re-run reuses every cached stage (see docs/cli.md)")
     from ..report.pdf import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,

@@ -22,11 +22,19 @@ from .printable import write_tag_sheets
 log = logging.getLogger(__name__)
 
 
-def placement_records(placement, method: str) -> list[dict]:
-    """One JSON-ready dict per placed marker, in placement order."""
+def placement_records(placement, method: str, disc=None) -> list[dict]:
+    """One JSON-ready dict per placed marker, in placement order.
+
+    With the run's :class:`~markerplace.plan.discretization.Discretization` ``disc``, each
+    record says what the tag is on: ``surface`` (``"wall"``, ``"column"``, or for a category
+    ``--allow`` allowed e.g. ``"bookshelf front"``) and ``surface_part`` (the mesh part's name).
+    """
     rows = []
     for i, (m, c, g) in enumerate(zip(placement.markers, placement.candidates, placement.gains)):
         n = m.normal
+        on = {}
+        if disc is not None:
+            on = {"surface": str(disc.candidate_surface[int(c)]), "surface_part": str(disc.candidate_part[int(c)])}
         rows.append({
             "order": i + 1,
             "tag_id": int(m.tag_id),
@@ -39,6 +47,7 @@ def placement_records(placement, method: str) -> list[dict]:
             "gain": None if not np.isfinite(g) else float(g),
             "candidate_index": int(c),
             "method": method,
+            **on,
         })
     return rows
 
@@ -82,7 +91,7 @@ def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, m
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
                        scene_source: str, scene, existing: Sequence = (), world_offset=None, paper: str = "a4",
-                       scene_options: dict | None = None) -> dict:
+                       scene_options: dict | None = None, exclusion=None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
 
     ``scene`` (internal frame) is measured for the installer's instructions (each marker's
@@ -91,7 +100,8 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     ``paper`` sets tags.pdf's paper (:mod:`markerplace.report.pdf`); ``scene_options`` (``up``,
     ``unit_scale``, ``seed`` of the scene argument) go into config.json with the existing markers,
     so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
-    (:mod:`markerplace.report.deliverables`).
+    (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
+    :class:`~markerplace.plan.exclusion.Exclusion`, user frame) goes there too.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -99,7 +109,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     """
     out_dir = Path(out_dir)
     install = plan_instructions(scene, placement, data.disc, config.discretize.height,
-                                [r.get("surface") for r in placement_records(placement, method)])
+                                [r.get("surface") for r in placement_records(placement, method, data.disc)])
     if world_offset is not None and np.any(world_offset):
         from dataclasses import replace
 
@@ -127,7 +137,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "planned_storeys": [int(s) for s in disc.planned_storeys],
         "discretization": disc.summary,
     }
-    records = placement_records(placement, method)
+    records = placement_records(placement, method, disc)
     for r, inst in zip(records, install):
         r["install"] = install_to_frame(inst, world_offset)
     for r, sh in zip(records, sheet_plan(records, paper)):  # where each tag is in tags.pdf
@@ -140,7 +150,8 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
     write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config), "scene_options": scene_options or {},
-                                         "existing_markers": [m.to_json() for m in existing]})
+                                         "existing_markers": [m.to_json() for m in existing],
+                                         "exclude": None if exclusion is None else exclusion.to_json()})
 
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
     eye = disc.storeys[disc.planned_storeys] + config.discretize.height

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .html import esc, img, jpeg_uri, png_file_uri, table, write_page
+from .review import REVIEW_SCRIPT, reject_button, review_box, surface_line
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +64,8 @@ def _scene_section(doc: dict, num_markers: int) -> str:
         ["storeys planned", ", ".join(str(v) for v in s.get("planned_storeys", []))],
         ["camera poses", f"{s.get('num_poses', 0)} ({s.get('num_locations', 0)} locations x {yaws} yaws)"],
         ["wall spots found", disc.get("wall_spots", "?")],
-        ["removed: on glass / tag does not fit flat / seen by no camera",
-         f"{removed.get('glass', 0)} / {removed.get('does not fit', 0)} / {removed.get('not seen', 0)}"],
+        ["removed (a spot counts once, under the first rule)",
+         _removed_words(removed, float((doc.get("markers") or [{}])[0].get("size", 0.4)))],
         ["candidate spots competing", s.get("num_candidates", "?")],
     ]
     unreached = [f"storey {p['storey']}: {u['area_m2']:.1f} m^2 around ({u['centre'][0]:.1f}, {u['centre'][1]:.1f})"
@@ -74,6 +75,16 @@ def _scene_section(doc: dict, num_markers: int) -> str:
     return ("<h2>Scene</h2>" + table(None, facts) +
             table(["storey", "floor (m)", "open floor (m^2)", "free (m^2)", "camera locations", "candidate spots",
                    "regions without cameras"], rows + total) + note)
+
+
+def _removed_words(removed: dict, size: float) -> str:
+    """What the candidate rules and the planner removed, e.g. ``"3 on glass, 2 on doors, ...,
+    1 seen by no camera"`` (:mod:`markerplace.plan.wall_candidates`; ``size``: the tag, metres)."""
+    from ..plan.wall_candidates import RULES, rule_words
+
+    words = [f"{removed[r]} {rule_words(r, size)}" for r in RULES if removed.get(r)]
+    words += [f"{removed['not seen']} seen by no camera"] if removed.get("not seen") else []
+    return ", ".join(words) or "none"
 
 
 def _scores_section(s: dict) -> str:
@@ -161,9 +172,11 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
             + "; hang it with the caption (\"this edge down\") at the bottom.",
             f"Model coordinates of the centre: ({x:.2f}, {y:.2f}, {z:.2f}) m.",
         ]
+        on = surface_line(r)  # what the tag is on (report/review.py)
+        items = items[:1] + ([on] if on else []) + items[1:]
         cards.append(
             f'<div class="tag" id="tag{r["order"]}"><h3>#{r["order"]}: tag id {r["tag_id"]}</h3>'
-            f'<ul class="caption">{"".join(f"<li>{t}</li>" for t in items)}</ul><div class="views">'
+            f'<ul class="caption">{"".join(f"<li>{t}</li>" for t in items)}</ul>{reject_button(r)}<div class="views">'
             + img(jpeg_uri(v.close), f"tag {r['order']} close view",
                   f"Standing {v.close_distance:.1f} m in front of the spot at eye level; the tag is outlined.")
             + img(jpeg_uri(v.wide), f"tag {r['order']} wide view",
@@ -179,7 +192,7 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
             "<h2>Tags</h2>", f"<p class=\"note\">{CONVENTION}</p>",
             table(["#", "tag id", "storey", "wall", "centre above the floor (m)", "along the wall, to the centre",
                    "tags.pdf pages"], checklist),
-            *cards]
+            review_box(str(doc.get("scene", "?")), str(out_dir)), *cards, REVIEW_SCRIPT]
     path = write_page(out_dir / "report.html", title, "\n".join(body))
     log.info("report.html: %d tags, %.1f s", len(records), time.perf_counter() - t0)
     return path
