@@ -233,22 +233,22 @@ def look_at(eye, target) -> np.ndarray:
 
 
 def views(person: Person, T: np.ndarray, edge_m: float) -> list[np.ndarray]:
-    """Two off-axis cameras in front of the tag with a clear view of it (closer when something
-    is in the way)."""
+    """Up to two off-axis cameras in front of the tag, one on each side, with a clear view of
+    it and standing in free space (closer and less oblique when something is in the way)."""
     c, n, right = T[:3, 3], T[:3, 2], T[:3, 0]
     corners = c + edge_m / 2 * np.array([s * right + u * UP for s, u in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
     out = []
     for side in (-1.0, 1.0):
-        for dist in (1.8, 1.4, 1.0):
-            eye = c + dist * n + side * 0.35 * dist * right - 0.15 * UP
+        for dist, lateral in ((1.8, 0.35), (1.4, 0.35), (1.1, 0.3), (1.8, 0.2), (1.4, 0.15), (0.9, 0.25)):
+            eye = c + dist * n + side * lateral * dist * right - 0.15 * UP
             d = corners - eye
             t, _ = person.hit(np.repeat(eye[None], 4, 0), d / np.linalg.norm(d, axis=1, keepdims=True))
             clear = np.all(t >= np.linalg.norm(d, axis=1) - 0.01)
             around = person.hit(np.repeat(eye[None], 4, 0), np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0.0]]))[0]
-            if clear and np.all(around > 0.15):
+            if clear and np.all(around > 0.1):
                 out.append(look_at(eye, c))
                 break
-    assert out, "no clear view of the hung tag"
+    assert out, f"no clear view of the hung tag at {np.round(c, 2)}"
     return out
 
 

@@ -53,6 +53,9 @@ class CandidateConfig:
         scan_rays: rays per 360-degree scan.
         max_scan_range: range of a scan ray, metres.
         front_offset: the point this far in front of a wall spot must be free, metres.
+        open_front: nothing may stand within this of the tag's face, over the whole tag and its
+            border, metres (default 0.6: a tag half hidden behind the end of a wardrobe, or in a
+            gap a person cannot stand in front of, is no spot anybody would pick).
         allow: keys of :data:`ALLOWABLE` whose spots stay candidates (default none: tags only
             on walls and columns).
         edge_step: a jump of more than this (metres) in the depth of the surface, within
@@ -76,6 +79,7 @@ class CandidateConfig:
     scan_rays: int = 720
     max_scan_range: float = 10.0
     front_offset: float = 0.15
+    open_front: float = 0.6
     allow: tuple[str, ...] = ()
     edge_step: float = 0.01
     profile_step: float = 0.02
@@ -124,10 +128,11 @@ def _tag_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: CandidateConfig,
-             opaque: np.ndarray | None = None, n_side: int = 7, standoff: float = 0.3) -> np.ndarray:
-    """(M,) bool: a tag of ``tag_size`` plus border centred at each (M, 3) point lies flat.
+             opaque: np.ndarray | None = None, n_side: int = 7) -> np.ndarray:
+    """(M,) bool: a tag of ``tag_size`` plus border centred at each (M, 3) point lies flat, with
+    ``open_front`` of open space in front of all of it.
 
-    Short rays along -normal from ``standoff`` in front of the wall, over an n_side x n_side
+    Rays along -normal from ``standoff = open_front`` in front of the wall, over an n_side x n_side
     grid of the tag square plus border, must all hit (a face that may carry a tag, when
     ``opaque`` (F,) bool is given: not glass, not a category that is not allowed) within
     ``flatness_tol`` of the plane through the centre, and the sample origins must be reachable
@@ -137,6 +142,7 @@ def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: Ca
     M = len(centers)
     if M == 0:
         return np.zeros(0, dtype=bool)
+    standoff = float(config.open_front)
     h = config.tag_size * (0.5 + config.tag_border)
     a = np.linspace(-h, h, n_side)
     A, B = (v.ravel() for v in np.meshgrid(a, a))

@@ -205,7 +205,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
 
     # the parts' names and glass decide which wall spots may carry a tag (plan.wall_candidates)
     labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
-    disc_key = cache.hash_of("discretize-v3", cache.scene_hash(scene), labels, config.discretize)
+    disc_key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.discretize)
     disc = cached("discretize", run_dir / "discretization.npz", disc_key, lambda: discretize(scene, config.discretize),
                   save_discretization, load_discretization, timings)
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
