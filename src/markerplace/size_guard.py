@@ -10,6 +10,14 @@ The bound is loose for multi-level models whose storeys cover little of the boun
 game level with a deep pit), so a run over the limits by the bound is checked again
 with the discretization's exact count (:func:`over_limits` tells when; discretizing takes
 seconds) before it is refused, unless it is over by more than :data:`RECOUNT_FACTOR`.
+
+The constants are a first guess only: the cost of a pose varies tenfold between scenes (a
+procedural room, 35 ms on one core; a vertex-coloured scan of a million faces, 0.4 s on
+llvmpipe). So once the discretization is known, :func:`time_sample` renders and extracts SIFT at
+a few of its own poses in this process, and :func:`estimate_plan` turns the measured seconds per
+pose, the start-up of a renderer and the features per pose into the time of each stage; that
+estimate is what ``plan`` logs and checks (README: within 2x of the measured time on room, house
+and a scan-like house, ``benchmarks/run_estimate.py``).
 """
 
 from __future__ import annotations
@@ -121,7 +129,7 @@ def machine_memory_bytes() -> float:
 
 
 def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0,
-                 poses: int | None = None) -> RunEstimate:
+                 poses: int | None = None, seconds_per_pose: float | None = None) -> RunEstimate:
     """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
 
     Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
@@ -131,7 +139,8 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     Memory and time use the per-pose costs measured on the reference machine (module
     constants). ``evaluate`` adds a map re-render per placement with markers and one
     localization per test image, test set and placement. ``poses``: the exact count (from a
-    discretization) instead of the bound.
+    discretization) instead of the bound; ``seconds_per_pose``: a measured cost of one pose on
+    one core (:func:`time_sample`) instead of :data:`SECONDS_PER_POSE_CORE`.
     """
     from .runtime.workers import default_workers
 
@@ -147,7 +156,8 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     workers = default_workers(plan_config.runtime.workers)
     cells = (float(hi[0] - lo[0]) / OCCUPANCY_CELL + 20) * (float(hi[1] - lo[1]) / OCCUPANCY_CELL + 20)
     memory = BASE_BYTES + workers * BYTES_PER_WORKER + poses * BYTES_PER_POSE + cells * BYTES_PER_GRID_CELL
-    core_seconds = poses * SECONDS_PER_POSE_CORE
+    per_pose = SECONDS_PER_POSE_CORE if seconds_per_pose is None else float(seconds_per_pose)
+    core_seconds = poses * per_pose
     queries = 0
     if evaluate_config is not None:
         from .testbed.placements import NO_MARKERS, marker_set_count
@@ -155,9 +165,126 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
         with_markers = marker_set_count(evaluate_config) + extra_placements
         placements = with_markers + (1 if NO_MARKERS in evaluate_config.study.methods else 0)
         queries = evaluate_config.test.tests * len(evaluate_config.test.sets) * placements
-        core_seconds += with_markers * poses * SECONDS_PER_POSE_CORE + queries * SECONDS_PER_QUERY_CORE \
-            + evaluate_config.test.tests * len(evaluate_config.test.sets) * SECONDS_PER_POSE_CORE
+        core_seconds += with_markers * poses * per_pose + queries * SECONDS_PER_QUERY_CORE \
+            + evaluate_config.test.tests * len(evaluate_config.test.sets) * per_pose
     return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys, exact)
+
+
+SAMPLE_POSES = 16
+"""Poses :func:`time_sample` renders (the first one, which warms up SIFT and the GL driver, is not
+timed)."""
+PARALLEL_EFFICIENCY = 0.85
+"""Speed-up of W rendering processes over one, per process (the main process also works)."""
+SIMILARITY_EXACT_S_PER_PAIR = 5e-9
+"""Exact look-alike search, seconds per pair of points (2 cores; room: 23k points in 2.3 s)."""
+SIMILARITY_IVF_S_PER_POINT = 1.5e-4
+"""Inverted-file look-alike search, seconds per point (2 cores: 0.7e-4 on house's 166k points,
+1.9e-4 on the scan-like house's 86k real-texture points)."""
+OUTPUT_SECONDS = 3.0
+"""Writing the plan's files and report, besides the installer views."""
+VIEWS_PER_TAG = 3
+"""Renders per placed tag for the report's installer views."""
+
+
+@dataclass(frozen=True)
+class PoseSample:
+    """What a few real poses of the scene cost here (see :func:`time_sample`).
+
+    Attributes:
+        seconds_per_pose: render + SIFT + 3D lift of one pose on one core, seconds.
+        setup_seconds: loading the scene and starting a renderer (each worker pays it once).
+        features_per_pose: SIFT features with a 3D point per pose (the look-alike search's input).
+        poses: poses timed.
+    """
+
+    seconds_per_pose: float
+    setup_seconds: float
+    features_per_pose: float
+    poses: int
+
+
+def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSES) -> PoseSample:
+    """Render and extract features at ``n`` poses spread over ``world_from_cam`` ((N, 4, 4)) in
+    this process, as a worker of the observe stage does, and time it."""
+    import time
+
+    import numpy as np
+
+    from .imaging.engine import EngineSpec, ImagingEngine
+
+    poses = np.asarray(world_from_cam, float).reshape(-1, 4, 4)
+    pick = np.unique(np.linspace(0, len(poses) - 1, max(2, n)).round().astype(int)) if len(poses) else []
+    t0 = time.perf_counter()
+    engine = ImagingEngine(EngineSpec(scene_spec, imaging_config, {}))
+    try:
+        setup = time.perf_counter() - t0
+        times, feats = [], []
+        for i in pick:
+            t1 = time.perf_counter()
+            res = engine.render(poses[i])
+            f = engine.features(res).with_3d_only()
+            times.append(time.perf_counter() - t1)
+            feats.append(len(f.keypoints))
+    finally:
+        engine.close()
+    timed = times[1:] if len(times) > 1 else times
+    return PoseSample(float(np.mean(timed)) if timed else SECONDS_PER_POSE_CORE, setup,
+                      float(np.mean(feats)) if feats else 0.0, len(timed))
+
+
+def estimate_plan(sample: PoseSample, poses: int, workers: int, similarity_config, k: int,
+                  similarity: bool = True) -> dict[str, float]:
+    """Seconds of the remaining stages of a plan from a :class:`PoseSample`: ``observe`` (every
+    worker starts a renderer, then the poses are shared), ``similarity`` (exact or inverted-file
+    search on the expected points, as :func:`markerplace.plan.similarity.count_similar` picks),
+    ``outputs`` (files, report, installer views) and ``total``."""
+    eff = max(1.0, workers * PARALLEL_EFFICIENCY) if workers > 1 else 1.0
+    observe = sample.setup_seconds + poses * sample.seconds_per_pose / eff
+    points = poses * sample.features_per_pose
+    if not similarity:
+        sim = 0.0
+    elif points <= similarity_config.exact_max_points and similarity_config.method != "ivf":
+        sim = SIMILARITY_EXACT_S_PER_PAIR * points ** 2
+    else:
+        sim = SIMILARITY_IVF_S_PER_POINT * points
+    outputs = OUTPUT_SECONDS + k * VIEWS_PER_TAG * sample.seconds_per_pose
+    return {"observe": observe, "similarity": sim, "outputs": outputs, "total": observe + sim + outputs}
+
+
+def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = False, evaluate_config=None,
+                        extra_placements: int = 0):
+    """The check ``prepare`` runs once the discretization is known and before it renders: a
+    :func:`time_sample` of the scene's own poses, the stage times of :func:`estimate_plan` (plus
+    the evaluation's, for ``evaluate``) logged, and :func:`check_run_size` on them. Returns the
+    callable ``check(disc)``."""
+    from dataclasses import replace
+
+    from .progress import format_duration
+    from .runtime.workers import default_workers
+
+    def check(disc) -> None:
+        N = len(disc.world_from_cam)
+        sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
+        workers = default_workers(plan_config.runtime.workers)
+        stages = estimate_plan(sample, N, workers, plan_config.similarity, k, plan_config.placement.similarity)
+        estimate = estimate_run(scene, plan_config, evaluate_config, extra_placements, poses=N,
+                                seconds_per_pose=sample.seconds_per_pose)
+        evaluation = 0.0
+        if evaluate_config is not None:
+            evaluation = estimate.seconds - estimate_run(scene, plan_config, None, 0, poses=N,
+                                                         seconds_per_pose=sample.seconds_per_pose).seconds
+        elapsed = _seconds_since_start()
+        estimate = replace(estimate, seconds=elapsed + stages["total"] + evaluation)
+        log.info("run size: %d poses; %d of them here took %.0f ms each (%.1f s to start a renderer), so about "
+                 "%s to render and extract features, %s for the look-alikes (%d points), %s for the outputs%s; "
+                 "with the %s so far, about %s in all on %d worker(s) and %s of memory", N, sample.poses,
+                 1000 * sample.seconds_per_pose, sample.setup_seconds, format_duration(stages["observe"]),
+                 format_duration(stages["similarity"]), int(N * sample.features_per_pose),
+                 format_duration(stages["outputs"]), f", {format_duration(evaluation)} to evaluate" if evaluation else "",
+                 format_duration(elapsed), format_duration(estimate.seconds), workers, _gib(estimate.memory_bytes))
+        check_run_size(estimate, force=force, log_ok=False)
+
+    return check
 
 
 def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
@@ -176,9 +303,22 @@ def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
     return reasons
 
 
+def _seconds_since_start() -> float:
+    """Wall seconds since this process started (imports included)."""
+    import time
+
+    import psutil
+
+    try:
+        return max(0.0, time.time() - psutil.Process().create_time())
+    except psutil.Error:
+        return 0.0
+
+
 def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimits = SizeLimits(),
-                   memory_bytes: float | None = None) -> None:
-    """Refuse a run over ``limits`` (unless ``force``), naming the numbers and the flag.
+                   memory_bytes: float | None = None, log_ok: bool = True, what: str = "run size") -> None:
+    """Refuse a run over ``limits`` (unless ``force``), naming the numbers and the flag; a run
+    within them is logged as ``what: ...`` unless ``log_ok`` is False.
 
     Raises:
         UserError: estimated poses over ``max_poses``, time over ``max_hours`` or memory over
@@ -186,7 +326,8 @@ def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimit
     """
     reasons = over_limits(estimate, limits, memory_bytes)
     if not reasons:
-        log.info("run size: %s", estimate.describe())
+        if log_ok:
+            log.info("%s: %s", what, estimate.describe())
         return
     if force:
         log.warning("run size: %s (%s); going on because of --force", estimate.describe(), " and ".join(reasons))

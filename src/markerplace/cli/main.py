@@ -109,10 +109,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     run_config = plan_inputs_in_scene_frame(config, scene, args.force)
     progress = not args.quiet
     from ..runtime.executor import make_executor
+    from ..size_guard import measured_size_check
     from ..testbed.calibration import calibrate_plan
 
     with make_executor(run_config.runtime) as executor:
-        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
+        size_check = measured_size_check(scene, spec, run_config, config.placement.k, force=args.force)
+        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor,
+                       before_observe=size_check)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     if exclusion is not None:

@@ -56,7 +56,7 @@ def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None,
         log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
         poses = len(discretize(scene, config.discretize).world_from_cam)
         estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
-    check_run_size(estimate, force=force)
+    check_run_size(estimate, force=force, what="run size, a first guess before discretizing")
     return config
 
 

@@ -13,7 +13,7 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -183,7 +183,8 @@ def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, 
 
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
-            existing: Sequence[Marker] = (), progress: bool = True, executor=None) -> PlanData:
+            existing: Sequence[Marker] = (), progress: bool = True, executor=None,
+            before_observe: Callable[[Discretization], None] | None = None) -> PlanData:
     """Run (or reuse) discretize, observe, similarity and scoring for a scene.
 
     Args:
@@ -195,6 +196,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
         progress: progress bars on long stages.
         executor: where per-pose work runs (default: one made from ``config.runtime`` for
             this call).
+        before_observe: called with the discretization when the observe stage must run (not
+            when its artifact is reused), before anything renders: the run-size check of
+            :func:`markerplace.size_guard.measured_size_check`.
     """
     run_dir = Path(run_dir)
     run_folder.make_dirs(run_dir)
@@ -231,6 +235,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
             if own:
                 ex.close()
 
+    if before_observe is not None and not cache.is_fresh(run_dir / "observations", obs_key):
+        before_observe(disc)
     obs = cached("observe", run_dir / "observations", obs_key, run_observe, None, FeatureSet.load, timings)
     points, descriptors, pose_index = obs.points_world, obs.descriptors, obs.image_index
     log.info("observe: %d features with 3D points (%.0f per pose)", len(pose_index), len(pose_index) / max(N, 1))
