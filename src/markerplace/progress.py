@@ -37,8 +37,9 @@ def format_duration(seconds: float) -> str:
 
 class LogProgress:
     """Counts done items and logs ``desc: done/total unit (p %), rate, about T left`` at
-    most every ``interval_s`` seconds, then ``desc: total unit in T`` when closed; the same
-    ``update``/context-manager interface as a tqdm bar.
+    most every ``interval_s`` seconds, then ``desc: total unit in T`` when closed (not when the
+    ``with`` block ends in an exception, e.g. Ctrl-C); the same ``update``/context-manager
+    interface as a tqdm bar.
 
     Args:
         total: number of items, >= 0.
@@ -81,7 +82,10 @@ class LogProgress:
     def __enter__(self) -> "LogProgress":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:  # stopped (Ctrl-C, an error): no "done" line for a loop that was not
+            self._closed = True
+            return
         self.close()
 
 

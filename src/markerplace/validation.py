@@ -155,8 +155,56 @@ def check_args(args) -> None:
         parse_floats(args.pose, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
     if getattr(args, "start", None) is not None:
         parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
-    if command_name(args) == "evaluate" and isinstance(getattr(args, "k", None), str):
+    if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
+    if getattr(args, "cluster", None) is not None:
+        parse_cluster(args.cluster)
+        if getattr(args, "workers", 0):
+            raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
+                            "workers do the work (give their number in local:N); leave --workers out")
+
+
+CLUSTER_SCHEMES = ("tcp", "tls")
+"""Schemes of a Dask scheduler address that ``--cluster`` accepts (besides ``local:N``)."""
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity), at least 1."""
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def parse_cluster(text: str) -> tuple[str, str | int, int | None]:
+    """Parse a ``--cluster`` value: ``local:N`` or ``tcp://HOST:PORT`` / ``tls://HOST:PORT``.
+
+    Returns:
+        ``("local", N, None)`` with 1 <= N <= the usable CPUs (a ``LocalCluster`` of N worker
+        processes on this machine), or ``(scheme, host, port)`` of a running scheduler.
+
+    Raises:
+        UserError: anything else (another scheme, no port, N not a whole number in range).
+    """
+    text = str(text).strip()
+    form = "local:N (N worker processes here) or tcp://HOST:PORT of a running Dask scheduler, e.g. tcp://10.0.0.5:8786"
+    if text.lower().startswith("local:"):
+        n_text = text.split(":", 1)[1].strip()
+        cpus = usable_cpus()
+        if not n_text.isdigit():
+            raise UserError(f"--cluster {text!r}: N must be a whole number of workers, e.g. local:{min(2, cpus)}")
+        n = int(n_text)
+        if not 1 <= n <= cpus:
+            raise UserError(f"--cluster {text!r}: N must be between 1 and {cpus} (the CPUs of this machine), "
+                            f"e.g. local:{min(2, cpus)}")
+        return "local", n, None
+    scheme, sep, rest = text.partition("://")
+    if not sep or scheme.lower() not in CLUSTER_SCHEMES:
+        raise UserError(f"--cluster {text!r}: give {form} (the scheme must be tcp:// or tls://)")
+    host, colon, port_text = rest.rpartition(":")
+    host = host.strip("[]")
+    if not colon or not host or not port_text.isdigit() or not 1 <= int(port_text) <= 65535 or "/" in rest:
+        raise UserError(f"--cluster {text!r}: give {form} (HOST:PORT with a port in 1..65535)")
+    return scheme.lower(), host, int(port_text)
 
 
 def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:
@@ -181,22 +229,31 @@ def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[
 
 
 def parse_int_list(text: str, option: str, bound: Bound) -> tuple[int, ...]:
-    """Parse a comma-separated list of integers, each within ``bound``."""
+    """Parse a comma-separated list of integers, each within ``bound`` (not empty, no empty item)."""
+    items = [v.strip() for v in str(text).split(",")]
+    if not any(items):
+        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
+    if not all(items):
+        raise UserError(f"{option} {text!r} has an empty item: give integers separated by single commas, e.g. 5,10,15,20")
     try:
-        values = tuple(int(v) for v in str(text).split(",") if v.strip())
+        values = tuple(int(v) for v in items)
     except ValueError:
         raise UserError(f"{option} {text!r} must be a comma-separated list of integers, e.g. 5,10,15,20") from None
-    if not values:
-        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
     for v in values:
         bound.check(v)
     return values
 
 
 def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
-    """Parse a comma-separated list of finite numbers, each within ``bound`` (may be empty)."""
+    """Parse a comma-separated list of finite numbers, each within ``bound`` (``""`` is the empty
+    list; an empty item between commas is refused)."""
+    items = [v.strip() for v in str(text).split(",")]
+    if not any(items):
+        return ()
+    if not all(items):
+        raise UserError(f"{option} {text!r} has an empty item: give numbers separated by single commas, e.g. 0.1,0.25")
     try:
-        values = tuple(float(v) for v in str(text).split(",") if v.strip())
+        values = tuple(float(v) for v in items)
     except ValueError:
         raise UserError(f"{option} {text!r} must be a comma-separated list of numbers, e.g. 0.1,0.25") from None
     for v in values:

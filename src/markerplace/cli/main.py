@@ -1,7 +1,9 @@
 """Command line: parses arguments and chains library stages; no logic of its own.
 
 Every user-fixable problem surfaces as :class:`~markerplace.errors.UserError`: printed as one
-line ``markerplace: error: ...`` with exit code 2.
+line ``markerplace: error: ...`` with exit code 2; so does every argument error
+(:class:`OneLineParser`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
+/ 143 and one line saying how to resume (:mod:`markerplace.runtime.interrupt`).
 """
 
 from __future__ import annotations
@@ -129,8 +131,19 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line ``markerplace: error: ...`` (exit code 2),
+    naming the subcommand's ``--help``, instead of argparse's usage block. Subparsers made by
+    ``add_subparsers`` are of the same class."""
+
+    def error(self, message: str):
+        text = " ".join(str(message).split())
+        sys.stderr.write(f"markerplace: error: {text} (see `{self.prog} --help`)\n")
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="markerplace",
         description="Plan where to put AprilTag markers so camera localization works better (OMP), and prove it in simulation.",
     )
@@ -197,24 +210,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    setup_logging(quiet=args.quiet, verbose=args.verbose)
-    func = getattr(args, "func", None)
-    if func is None:
-        # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
-        if args.command == "scene":
-            parser.parse_args(["scene", "--help"])
-        parser.print_help()
-        return 2
-    try:
-        from ..validation import check_args
+    from ..runtime.interrupt import InterruptGuard
 
-        check_args(args)  # every numeric option of every subcommand: finite and in range
-        return int(func(args) or 0)
-    except UserError as err:
-        print(f"markerplace: error: {err}", file=sys.stderr)
-        return err.exit_code
-    except KeyboardInterrupt:
-        print("markerplace: interrupted", file=sys.stderr)
-        return 130
+    with InterruptGuard() as guard:
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            setup_logging(quiet=args.quiet, verbose=args.verbose)
+            func = getattr(args, "func", None)
+            if func is None:
+                # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
+                if args.command == "scene":
+                    parser.parse_args(["scene", "--help"])
+                parser.print_help()
+                return 2
+            from ..validation import check_args
+
+            check_args(args)  # every numeric option of every subcommand: finite and in range
+            return int(func(args) or 0)
+        except UserError as err:
+            print(f"markerplace: error: {err}", file=sys.stderr)
+            return err.exit_code
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (runtime.interrupt.Terminated)
+            return guard.stopped(err)

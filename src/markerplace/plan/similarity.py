@@ -138,6 +138,7 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     method = config.method
     if method == "auto":
         method = "exact" if len(descriptors) <= config.exact_max_points else "ivf"
+    log.info("similarity (%s): counting look-alikes of %d points", method, len(descriptors))
     t0 = time.perf_counter()
     out = (count_similar_exact if method == "exact" else count_similar_ivf)(descriptors, points_world, config)
     log.info("similarity (%s): %d points, mean n_p %.2f, %.1f s", method, len(out),
