@@ -59,7 +59,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     # every input file is read before any work: a bad --placements fails in a second, not after the plan
     placement_files = find_placement_files(args.placements) if args.placements else {}
     for path in placement_files.values():
-        load_markers(path)
+        load_markers(path, "--placements")
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))

@@ -62,9 +62,10 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     pose = _parse_pose(args.pose) if args.pose else None
     check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
+    user_markers = load_markers(args.markers, "--markers") if args.markers else []
     scene = load_scene(args.scene, up=args.up, unit_scale=args.unit_scale, seed=args.seed)
     offset = world_offset(scene)  # inputs are in the user's (file) frame
-    markers = markers_to_internal(load_markers(args.markers), offset) if args.markers else []
+    markers = markers_to_internal(user_markers, offset)
     if pose is not None:
         position = points_to_internal(pose[:3], offset)
         check_pose_in_scene(scene, position, offset)
@@ -82,7 +83,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from ..markers import check_markers_on_walls, load_markers
+    from ..markers import check_markers_on_walls, check_tag_budget, load_markers
     from ..scene.spec import SceneSpec
     from ..plan.placement import check_k
     from ..plan.planner import first_pick_gain, place, prepare, validate
@@ -97,7 +98,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if config.placement.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(config.placement.method).calibrated:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
-    existing = load_markers(args.existing) if args.existing else []
+    existing = load_markers(args.existing, "--existing") if args.existing else []
+    check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
     check_output_dir(args.out)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()

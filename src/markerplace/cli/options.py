@@ -102,6 +102,9 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
     ``max(ks)`` markers and the smaller budgets are evaluated on their own placements or prefixes.
     ``args`` is not changed.
     """
+    from ..markers import check_tag_budget
+
+    check_tag_budget(max(ks), [])  # placements get ids 0..k-1
     return plan_config_from_args(argparse.Namespace(**{**vars(args), "k": max(ks)}))
 
 

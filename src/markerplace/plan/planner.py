@@ -206,6 +206,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
              len(disc.locations), config.discretize.num_yaws, N, C)
+    check_k(config.placement.k, C)  # now, not after rendering and the look-alike search
 
     existing_T = np.array([m.world_from_marker for m in existing]).reshape(-1, 4, 4)
     all_T = np.concatenate([disc.candidate_world_from_marker, existing_T])
