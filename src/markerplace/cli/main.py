@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from .. import __version__
 from ..errors import UserError
@@ -42,6 +43,9 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
     from ..scene.export import export_glb
 
     check_output_file(args.out, "scene export OUT")
+    if Path(args.out).suffix.lower() != ".glb":
+        raise UserError(f"scene export OUT {args.out!r} must end in .glb (binary glTF with the textures inside; "
+                        "--as-scan writes .ply)")
     scene = load_scene(args.name, seed=args.seed)
     export_glb(scene, args.out)
     log.info("wrote %s (%d faces)", args.out, scene.num_faces)

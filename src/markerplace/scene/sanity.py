@@ -220,6 +220,8 @@ def check_up_axis(scene, world_from_file_rotation: np.ndarray, up_choices: dict[
 def missing_textures(path: Path) -> list[str]:
     """Texture files that ``path`` (``.gltf``, or ``.obj`` through its ``.mtl`` files) names but
     that do not exist, as written in the file. Embedded and ``data:`` images are never missing."""
+    from .loader import _original_names, decode_text
+
     path = Path(path)
     ext = path.suffix.lower()
     missing: list[str] = []
@@ -236,11 +238,11 @@ def missing_textures(path: Path) -> list[str]:
                 if not mtl.is_file():
                     missing.append(mtl.name)
                     continue
-                for line in mtl.read_text(encoding="utf-8", errors="replace").splitlines():
+                for line in decode_text(mtl.read_bytes()).splitlines():
                     parts = line.strip().split()
                     if parts and parts[0].lower().startswith("map_") and len(parts) > 1:
                         name = parts[-1]
-                        if not (mtl.parent / name).is_file():
+                        if not any((mtl.parent / n).is_file() for n in _original_names(name)):
                             missing.append(name)
     except (OSError, ValueError, AttributeError):
         return []
@@ -248,13 +250,15 @@ def missing_textures(path: Path) -> list[str]:
 
 
 def _obj_material_libraries(path: Path) -> list[Path]:
+    from .loader import _original_names, decode_text
+
     libs = []
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            if line.startswith("mtllib"):
-                name = line[len("mtllib"):].strip()
-                if name:
-                    libs.append(path.parent / name)
+    for line in decode_text(path.read_bytes()).splitlines():
+        if line.startswith("mtllib"):
+            name = line[len("mtllib"):].strip()
+            if name:
+                found = [path.parent / n for n in _original_names(name) if (path.parent / n).is_file()]
+                libs.append(found[0] if found else path.parent / name)
     return libs
 
 
