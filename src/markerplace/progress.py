@@ -37,7 +37,7 @@ def format_duration(seconds: float) -> str:
 
 class LogProgress:
     """Counts done items and logs ``desc: done/total unit (p %), rate, about T left`` at
-    most every ``interval_s`` seconds, then ``desc: total unit in T`` when closed (not when the
+    most every ``interval_s`` seconds (and ``desc: starting, ...`` at debug level), then ``desc: total unit in T`` when closed (not when the
     ``with`` block ends in an exception, e.g. Ctrl-C); the same ``update``/context-manager
     interface as a tqdm bar.
 
@@ -56,6 +56,7 @@ class LogProgress:
         self.interval_s, self._clock = float(interval_s), clock
         self._t0 = self._last = clock()
         self._closed = False
+        log.debug("%s: starting, %d/%d %s", desc, self.n, self.total, unit)
 
     def update(self, n: int = 1) -> None:
         """Count ``n`` more done items; log a line when ``interval_s`` has passed since the last."""

@@ -146,7 +146,9 @@ def command_name(args) -> str:
 
 def check_args(args) -> None:
     """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
-    default, skipped) and parse-check ``--pose``, ``--start`` and ``evaluate --k``."""
+    default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
+    ``--cluster`` (:func:`parse_cluster`; a scheduler address must answer like one,
+    :func:`markerplace.runtime.executor.check_scheduler`; ``--workers`` does not go with it)."""
     for dest, bound in BOUNDS.get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -158,10 +160,14 @@ def check_args(args) -> None:
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
     if getattr(args, "cluster", None) is not None:
-        parse_cluster(args.cluster)
+        kind, _, _ = parse_cluster(args.cluster)
         if getattr(args, "workers", 0):
             raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
                             "workers do the work (give their number in local:N); leave --workers out")
+        if kind != "local":  # a scheduler must answer now, not after the scene is loaded
+            from .runtime.executor import check_scheduler
+
+            check_scheduler(args.cluster)
 
 
 CLUSTER_SCHEMES = ("tcp", "tls")

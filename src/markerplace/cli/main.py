@@ -215,6 +215,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
+"""Commands that cache their stages in their output folder: an interrupted one resumes."""
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..runtime.interrupt import InterruptGuard
 
@@ -223,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
             setup_logging(quiet=args.quiet, verbose=args.verbose)
+            guard.resumable = args.command in RESUMABLE_COMMANDS
             func = getattr(args, "func", None)
             if func is None:
                 # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.

@@ -231,10 +231,10 @@ CLOSE_TIMEOUT_S = 2.0
 """Seconds the Dask client and a ``LocalCluster`` get to close after an aborted map."""
 
 
-def check_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> None:
+def check_scheduler(address: str, timeout_s: float | None = None) -> None:
     """Refuse, with one line, a ``--cluster`` address where no Dask scheduler answers.
 
-    Connects (``timeout_s``) and, for ``tcp://``, reads the handshake a Dask scheduler sends
+    Connects (``timeout_s``, default :data:`SCHEDULER_TIMEOUT_S`) and, for ``tcp://``, reads the handshake a Dask scheduler sends
     first (distributed's framing: an 8-byte little-endian length, the frame table, a msgpack dict
     with ``python`` and ``compression``), at most :data:`HANDSHAKE_MAX_BYTES`, within ``timeout_s``.
     A server that accepts and never answers, or answers something else, is refused here instead
@@ -253,6 +253,7 @@ def check_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> Non
     scheme, host, port = parse_cluster(address)
     if scheme == "local":
         return
+    timeout_s = SCHEDULER_TIMEOUT_S if timeout_s is None else float(timeout_s)
     start = "start one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`"
     try:
         sock = socket.create_connection((host, port), timeout=timeout_s)

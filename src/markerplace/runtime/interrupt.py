@@ -52,11 +52,15 @@ def exit_code(signum: int) -> int:
     return 128 + int(signum)
 
 
-def resume_message(signum: int) -> str:
-    """The one line printed when a run stops on ``signum``."""
+def resume_message(signum: int, resumable: bool = True) -> str:
+    """The one line printed when a run stops on ``signum``; ``resumable``: the command caches
+    its stages (``plan``, ``evaluate``, ``study``, ``check``), else its output is written
+    atomically at the end, so nothing half-written is left."""
     what = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
-    return (f"markerplace: {what}; to resume, re-run the same command: finished stages and the finished "
-            "parts of the interrupted stage are reused")
+    if resumable:
+        return (f"markerplace: {what}; to resume, re-run the same command: finished stages and the finished "
+                "parts of the interrupted stage are reused")
+    return f"markerplace: {what}; nothing was written: re-run the same command to start again"
 
 
 def _is_resource_tracker(proc) -> bool:
@@ -104,6 +108,7 @@ class InterruptGuard:
     def __init__(self, grace_s: float = GRACE_S, child_wait_s: float = CHILD_WAIT_S):
         self.grace_s, self.child_wait_s = float(grace_s), float(child_wait_s)
         self.signum: int | None = None
+        self.resumable = True  # set by the caller once it knows the command (see resume_message)
         self._on = False
         self._announced = False
         self._lock = threading.Lock()
@@ -157,7 +162,7 @@ class InterruptGuard:
                 return
             self._announced = True
         try:
-            print(resume_message(signum), file=sys.stderr, flush=True)
+            print(resume_message(signum, self.resumable), file=sys.stderr, flush=True)
         except Exception:  # stderr gone (a closed pipe): nothing to tell
             pass
 
