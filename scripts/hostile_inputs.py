@@ -243,7 +243,7 @@ def cases(w: Path, f: dict) -> list[Case]:
         Case("missing mesh file", plan("nope.glb", "s1"), "error", "no such file"),
         Case("unknown extension", plan(w / "model.stl", "s2"), "error", "unknown scene format"),
         Case("unknown built-in name", plan("offfice", "s3"), "error", "unknown scene"),
-        Case("empty OBJ", plan(w / "empty.obj", "s4"), "error", "no triangle faces"),
+        Case("empty OBJ", plan(w / "empty.obj", "s4"), "error", "is empty (0 bytes)"),
         Case("corrupt GLB", plan(w / "corrupt.glb", "s5"), "error", "could not read"),
         Case("point-cloud PLY", plan(w / "points.ply", "s6"), "error", "no triangle faces"),
         Case("a folder named .glb", plan(w / "dir.glb", "s7"), "error", "is a folder, not a mesh file"),
@@ -363,6 +363,8 @@ def checked_input_cases(w: Path, f: dict) -> list[Case]:
     o = lambda name: str(w / "out" / name)  # noqa: E731
     plan = lambda name, *extra: ["plan", "tiny", "-k", "2", "--out", o(name), *FAST, *extra]  # noqa: E731
     check = lambda name, installed: ["check", str(f["base"]), "--installed", str(installed), "--out", o(name)]  # noqa: E731
+    cluster = lambda name, address: ["plan", "tiny", "-k", "2", "--out", o(name), "--grid-spacing", "1.0",  # noqa: E731
+                                     "--quiet", "--cluster", address]
     quick = {"max_seconds": 10}
     c: list[Case] = []
     for key, text in (("neg", "tag_id -1 is outside tag36h11"), ("587", "tag_id 587 is outside tag36h11"),
@@ -390,18 +392,18 @@ def checked_input_cases(w: Path, f: dict) -> list[Case]:
              "has an empty item", extra=quick),
         Case("study -k 50 (more than candidates)", ["study", "tiny", "--k", "50", "--out", o("k2"), *FAST], "error",
              "candidate marker poses", extra={"max_seconds": 15}),
-        Case("--cluster foo://x", plan("c1", "--cluster", "foo://x"), "error", "the scheme must be tcp://", extra=quick),
-        Case("--cluster 127.0.0.1:8786 (no scheme)", plan("c2", "--cluster", "127.0.0.1:8786"), "error",
+        Case("--cluster foo://x", cluster("c1", "foo://x"), "error", "the scheme must be tcp://", extra=quick),
+        Case("--cluster 127.0.0.1:8786 (no scheme)", cluster("c2", "127.0.0.1:8786"), "error",
              "the scheme must be tcp://", extra=quick),
-        Case("--cluster local:100000", plan("c3", "--cluster", "local:100000"), "error", "N must be between 1 and",
+        Case("--cluster local:100000", cluster("c3", "local:100000"), "error", "N must be between 1 and",
              extra=quick),
         Case("--cluster local:1 --workers 3", ["plan", "tiny", "--out", o("c4"), "--cluster", "local:1", "--workers",
                                                "3"], "error", "--workers 3 has no effect", extra=quick),
-        Case("--cluster: a server that never answers", plan("c5", "--cluster", f["silent"]), "error",
+        Case("--cluster: a server that never answers", cluster("c5", f["silent"]), "error",
              "sent no Dask handshake", extra=quick),
-        Case("--cluster: a server answering garbage", plan("c6", "--cluster", f["garbage"]), "error",
+        Case("--cluster: a server answering garbage", cluster("c6", f["garbage"]), "error",
              "does not answer like a Dask scheduler", extra=quick),
-        Case("--cluster: nothing listening", plan("c7", "--cluster", "tcp://127.0.0.1:9"), "error",
+        Case("--cluster: nothing listening", cluster("c7", "tcp://127.0.0.1:9"), "error",
              "cannot reach the Dask scheduler", extra=quick),
         Case("plan without --out", ["plan", "tiny"], "error", "required: --out"),
         Case("plan -k abc", ["plan", "tiny", "--out", o("a1"), "-k", "abc"], "error", "invalid int value"),

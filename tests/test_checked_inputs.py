@@ -244,9 +244,9 @@ def test_workers_with_a_cluster_is_flagged(tmp_path, capsys):
     (True, "does not answer like a Dask scheduler"),
 ])
 def test_silent_and_garbage_servers_are_one_line(garbage, needle, tmp_path, capsys, monkeypatch):
-    from markerplace.runtime import executor
+    from markerplace.runtime import cluster
 
-    monkeypatch.setattr(executor, "SCHEDULER_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(cluster, "SCHEDULER_TIMEOUT_S", 1.0)
     with LoopbackServer(garbage) as server:
         t0 = time.perf_counter()
         code = _code(["plan", "tiny", "--out", str(tmp_path / "p"), "--cluster", server.address, "--quiet"])
@@ -258,7 +258,7 @@ def test_silent_and_garbage_servers_are_one_line(garbage, needle, tmp_path, caps
 def test_a_real_dask_scheduler_passes_the_probe():
     from distributed import LocalCluster
 
-    from markerplace.runtime.executor import check_scheduler
+    from markerplace.runtime.cluster import check_scheduler
 
     with LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=":0") as cluster:
         check_scheduler(cluster.scheduler_address, timeout_s=5.0)  # no UserError

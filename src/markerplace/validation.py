@@ -147,8 +147,9 @@ def command_name(args) -> str:
 def check_args(args) -> None:
     """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
     default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
-    ``--cluster`` (:func:`parse_cluster`; a scheduler address must answer like one,
-    :func:`markerplace.runtime.executor.check_scheduler`; ``--workers`` does not go with it)."""
+    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; a scheduler address must
+    answer like one, :func:`markerplace.runtime.cluster.check_scheduler`; ``--workers`` does
+    not go with it)."""
     for dest, bound in BOUNDS.get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -160,57 +161,14 @@ def check_args(args) -> None:
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
     if getattr(args, "cluster", None) is not None:
+        from .runtime.cluster import check_scheduler, parse_cluster
+
         kind, _, _ = parse_cluster(args.cluster)
         if getattr(args, "workers", 0):
             raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
                             "workers do the work (give their number in local:N); leave --workers out")
         if kind != "local":  # a scheduler must answer now, not after the scene is loaded
-            from .runtime.executor import check_scheduler
-
             check_scheduler(args.cluster)
-
-
-CLUSTER_SCHEMES = ("tcp", "tls")
-"""Schemes of a Dask scheduler address that ``--cluster`` accepts (besides ``local:N``)."""
-
-
-def usable_cpus() -> int:
-    """CPUs this process may run on (its affinity), at least 1."""
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def parse_cluster(text: str) -> tuple[str, str | int, int | None]:
-    """Parse a ``--cluster`` value: ``local:N`` or ``tcp://HOST:PORT`` / ``tls://HOST:PORT``.
-
-    Returns:
-        ``("local", N, None)`` with 1 <= N <= the usable CPUs (a ``LocalCluster`` of N worker
-        processes on this machine), or ``(scheme, host, port)`` of a running scheduler.
-
-    Raises:
-        UserError: anything else (another scheme, no port, N not a whole number in range).
-    """
-    text = str(text).strip()
-    form = "local:N (N worker processes here) or tcp://HOST:PORT of a running Dask scheduler, e.g. tcp://10.0.0.5:8786"
-    if text.lower().startswith("local:"):
-        n_text = text.split(":", 1)[1].strip()
-        cpus = usable_cpus()
-        if not n_text.isdigit():
-            raise UserError(f"--cluster {text!r}: N must be a whole number of workers, e.g. local:{min(2, cpus)}")
-        n = int(n_text)
-        if not 1 <= n <= cpus:
-            raise UserError(f"--cluster {text!r}: N must be between 1 and {cpus} (the CPUs of this machine), "
-                            f"e.g. local:{min(2, cpus)}")
-        return "local", n, None
-    scheme, sep, rest = text.partition("://")
-    if not sep or scheme.lower() not in CLUSTER_SCHEMES:
-        raise UserError(f"--cluster {text!r}: give {form} (the scheme must be tcp:// or tls://)")
-    host, colon, port_text = rest.rpartition(":")
-    host = host.strip("[]")
-    if not colon or not host or not port_text.isdigit() or not 1 <= int(port_text) <= 65535 or "/" in rest:
-        raise UserError(f"--cluster {text!r}: give {form} (HOST:PORT with a port in 1..65535)")
-    return scheme.lower(), host, int(port_text)
 
 
 def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:

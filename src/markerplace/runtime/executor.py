@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
 from ..errors import UserError
+from .cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
 from .workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool, \
     worker_signals
 
@@ -223,86 +224,8 @@ class PoolExecutor(Executor):
                 ctx.__exit__(None, None, None)
 
 
-SCHEDULER_TIMEOUT_S = 5.0
-"""Seconds a Dask scheduler has to accept a connection and to send its handshake."""
-HANDSHAKE_MAX_BYTES = 1 << 16
-"""A Dask handshake (a small msgpack dict) is far below this; a longer announced message is not one."""
 CLOSE_TIMEOUT_S = 2.0
 """Seconds the Dask client and a ``LocalCluster`` get to close after an aborted map."""
-
-
-def check_scheduler(address: str, timeout_s: float | None = None) -> None:
-    """Refuse, with one line, a ``--cluster`` address where no Dask scheduler answers.
-
-    Connects (``timeout_s``, default :data:`SCHEDULER_TIMEOUT_S`) and, for ``tcp://``, reads the handshake a Dask scheduler sends
-    first (distributed's framing: an 8-byte little-endian length, the frame table, a msgpack dict
-    with ``python`` and ``compression``), at most :data:`HANDSHAKE_MAX_BYTES`, within ``timeout_s``.
-    A server that accepts and never answers, or answers something else, is refused here instead
-    of hanging Dask's client or letting it allocate what the garbage announces. ``tls://`` is
-    only connected to (its handshake is encrypted).
-
-    Raises:
-        UserError: a malformed address, no connection, no answer in time, or not a Dask answer.
-    """
-    import socket
-    import struct
-    import time
-
-    from ..validation import parse_cluster
-
-    scheme, host, port = parse_cluster(address)
-    if scheme == "local":
-        return
-    timeout_s = SCHEDULER_TIMEOUT_S if timeout_s is None else float(timeout_s)
-    start = "start one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`"
-    try:
-        sock = socket.create_connection((host, port), timeout=timeout_s)
-    except socket.timeout:
-        raise UserError(f"--cluster {address}: no connection within {timeout_s:g} s: cannot reach the Dask "
-                        f"scheduler; check the address and firewall, or {start}") from None
-    except OSError as err:
-        raise UserError(f"--cluster {address}: cannot reach the Dask scheduler ({err.strerror or err}); "
-                        f"{start}") from None
-    if scheme != "tcp":
-        sock.close()
-        return
-    deadline = time.monotonic() + timeout_s
-
-    def read(n: int) -> bytes:
-        buf = b""
-        while len(buf) < n:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise socket.timeout
-            sock.settimeout(left)
-            chunk = sock.recv(n - len(buf))
-            if not chunk:
-                raise ConnectionError("closed")
-            buf += chunk
-        return buf
-
-    not_dask = (f"--cluster {address}: the server there does not answer like a Dask scheduler; check the port "
-                f"(a scheduler listens on 8786 by default) or {start}")
-    with sock:
-        try:
-            (n,) = struct.unpack("<Q", read(8))
-            if not 16 <= n <= HANDSHAKE_MAX_BYTES:
-                raise UserError(not_dask)
-            body = read(n)
-        except socket.timeout:
-            raise UserError(f"--cluster {address}: the server accepted the connection but sent no Dask handshake "
-                            f"within {timeout_s:g} s; is it a Dask scheduler? {start}") from None
-        except OSError:
-            raise UserError(not_dask) from None
-    try:
-        import msgpack
-        from distributed.protocol.utils import unpack_frames
-
-        info = msgpack.unpackb(bytes(unpack_frames(body)[0]), raw=False)
-    except Exception:
-        raise UserError(not_dask) from None
-    if not isinstance(info, dict) or "python" not in info:
-        raise UserError(not_dask)
 
 
 class DaskExecutor(Executor):
@@ -322,8 +245,6 @@ class DaskExecutor(Executor):
             from distributed import Client, LocalCluster
         except ImportError:  # pragma: no cover - dependency declared
             raise UserError("--cluster needs dask[distributed]: pip install 'dask[distributed]'") from None
-        from ..validation import parse_cluster
-
         self._cluster = None
         self.client = None
         kind, n, _ = parse_cluster(address)

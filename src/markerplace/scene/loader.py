@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ import numpy as np
 from ..errors import UserError
 from .worldframe import OFFSET_KEY
 from . import sanity
+from .mesh_text import decode_text, original_names
 from .transparency import material_transparency, read_gltf_json
 from .types import MeshPart, Scene
 
@@ -122,34 +122,6 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     return scene
 
 
-def decode_text(data: bytes) -> str:
-    """Text of an OBJ or MTL file: UTF-8 (a BOM is dropped) when the bytes are UTF-8, else
-    Windows-1252 (Latin-1 for its five unassigned bytes). Never fails, and decodes an OBJ and its
-    MTL files the same way, so material names (``usemtl Béton``) match (trimesh guesses each
-    file's encoding separately, from its first 1000 bytes, and can guess differently)."""
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        pass
-    try:
-        return data.decode("cp1252")
-    except UnicodeDecodeError:
-        return data.decode("latin-1")
-
-
-def _original_names(name: str) -> list[str]:
-    """``name`` and, for a name read from non-UTF-8 text, the file-system names of its original bytes."""
-    out = [name]
-    for enc in ("cp1252", "latin-1"):
-        try:
-            alt = os.fsdecode(name.encode(enc))
-        except UnicodeEncodeError:
-            continue
-        if alt not in out:
-            out.append(alt)
-    return out
-
-
 def _resolver(path: Path):
     """trimesh's resolver of the files a model names (MTL, textures, glTF buffers), restricted to
     the model's folder as trimesh's own, but: a name outside the folder is recorded in
@@ -163,7 +135,7 @@ def _resolver(path: Path):
 
         def get(self, name: str):
             data = None
-            for candidate in _original_names(name):
+            for candidate in original_names(name):
                 try:
                     data = super().get(candidate)
                     break

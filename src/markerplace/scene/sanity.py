@@ -23,6 +23,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..errors import UserError
+from .mesh_text import decode_text, original_names
 
 log = logging.getLogger("markerplace.scene.loader")
 
@@ -220,8 +221,6 @@ def check_up_axis(scene, world_from_file_rotation: np.ndarray, up_choices: dict[
 def missing_textures(path: Path) -> list[str]:
     """Texture files that ``path`` (``.gltf``, or ``.obj`` through its ``.mtl`` files) names but
     that do not exist, as written in the file. Embedded and ``data:`` images are never missing."""
-    from .loader import _original_names, decode_text
-
     path = Path(path)
     ext = path.suffix.lower()
     missing: list[str] = []
@@ -242,7 +241,7 @@ def missing_textures(path: Path) -> list[str]:
                     parts = line.strip().split()
                     if parts and parts[0].lower().startswith("map_") and len(parts) > 1:
                         name = parts[-1]
-                        if not any((mtl.parent / n).is_file() for n in _original_names(name)):
+                        if not any((mtl.parent / n).is_file() for n in original_names(name)):
                             missing.append(name)
     except (OSError, ValueError, AttributeError):
         return []
@@ -250,14 +249,12 @@ def missing_textures(path: Path) -> list[str]:
 
 
 def _obj_material_libraries(path: Path) -> list[Path]:
-    from .loader import _original_names, decode_text
-
     libs = []
     for line in decode_text(path.read_bytes()).splitlines():
         if line.startswith("mtllib"):
             name = line[len("mtllib"):].strip()
             if name:
-                found = [path.parent / n for n in _original_names(name) if (path.parent / n).is_file()]
+                found = [path.parent / n for n in original_names(name) if (path.parent / n).is_file()]
                 libs.append(found[0] if found else path.parent / name)
     return libs
 
