@@ -116,7 +116,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..testbed.calibration import calibrate_plan
 
     with make_executor(run_config.runtime) as executor:
-        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor)
+        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor,
+                       k=config.placement.k)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     placement = place(data, config.placement, existing=existing, progress=progress)

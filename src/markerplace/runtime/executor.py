@@ -224,7 +224,7 @@ class PoolExecutor(Executor):
                 ctx.__exit__(None, None, None)
 
 
-CLOSE_TIMEOUT_S = 2.0
+CLOSE_TIMEOUT_S = 1.0
 """Seconds the Dask client and a ``LocalCluster`` get to close after an aborted map."""
 
 

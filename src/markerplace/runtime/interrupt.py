@@ -10,14 +10,14 @@ What happens then:
   terminate their process pools or close their Dask cluster
   (:mod:`markerplace.runtime.executor`), stages keep the parts they finished. Further signals
   while stopping are ignored (a second Ctrl-C cannot interrupt the clean-up half-way).
-* :func:`stop_children` ends whatever child processes are left (terminate, then kill after
-  ``CHILD_WAIT_S``); multiprocessing's resource tracker is left alone: it ignores signals and
+* After a signal, :func:`stop_children` ends whatever child processes are left (terminate, then
+  kill after ``CHILD_WAIT_S``); multiprocessing's resource tracker is left alone: it ignores signals and
   exits by itself when this process is gone.
 * A watchdog thread learns of the signal through :func:`signal.set_wakeup_fd`, which the C-level
   handler writes even while the main thread sits in a long C call (FAISS, a compiled kernel).
   If the process still runs ``GRACE_S`` seconds after the signal, the watchdog prints the
   message, stops the children and ends the process with the same exit code. So the command
-  ends within about ``GRACE_S + CHILD_WAIT_S`` seconds whatever it was doing.
+  ends within about ``GRACE_S + CHILD_WAIT_S + 0.5`` seconds (4.3 s) whatever it was doing.
 
 Exit codes: 130 after SIGINT, 143 after SIGTERM (128 + the signal number, as a shell reports).
 The message says how to resume: re-run the same command; finished stages (and the finished
@@ -37,7 +37,7 @@ __all__ = ["Terminated", "InterruptGuard", "stop_children", "exit_code", "resume
 
 GRACE_S = 3.0
 """Seconds the main thread has after the first signal to clean up before the watchdog ends the process."""
-CHILD_WAIT_S = 1.0
+CHILD_WAIT_S = 0.8
 """Seconds a terminated child has to exit before it is killed."""
 
 _STOP = b"\x00"  # written to the wakeup pipe to end the watchdog (no signal has number 0)
@@ -91,7 +91,7 @@ def stop_children(wait_s: float = CHILD_WAIT_S) -> int:
             p.kill()
         except psutil.Error:
             pass
-    psutil.wait_procs(alive, timeout=wait_s)
+    psutil.wait_procs(alive, timeout=min(wait_s, 0.5))
     return len(children)
 
 
@@ -167,12 +167,14 @@ class InterruptGuard:
             pass
 
     def stopped(self, err: BaseException) -> int:
-        """Clean up after ``err`` (a KeyboardInterrupt that reached the command line): stop the
-        children left, print the message once; returns the exit code."""
+        """Clean up after ``err`` (a KeyboardInterrupt that reached the command line): print the
+        message once and, after a real signal, stop the children left; returns the exit code."""
+        signalled = self.signum is not None
         signum = self.signum or (signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT)
         self.signum = signum  # further signals are ignored from here on
         self._announce(signum)
-        stop_children(self.child_wait_s)
+        if signalled:  # not for a KeyboardInterrupt raised by code: the caller's own children are not ours
+            stop_children(self.child_wait_s)
         return exit_code(signum)
 
     def _watch(self) -> None:
