@@ -14,7 +14,7 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
 
 Any traceback, any other exit code, a missing message, a run over its time limit or a failed
 output check is reported. Prints one line per case and a summary; writes ``hostile_inputs.md``
-into the work folder. Takes about 10 minutes on 2 cores. Usage::
+into the work folder. Takes about 5 minutes on 2 cores. Usage::
 
     .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING]
 

@@ -147,9 +147,9 @@ def command_name(args) -> str:
 def check_args(args) -> None:
     """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
     default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
-    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; a scheduler address must
-    answer like one, :func:`markerplace.runtime.cluster.check_scheduler`; ``--workers`` does
-    not go with it)."""
+    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
+    with it). Whether a scheduler answers is checked once the output paths are
+    (:func:`markerplace.cli.options.check_cluster_answers`)."""
     for dest, bound in BOUNDS.get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -161,14 +161,12 @@ def check_args(args) -> None:
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
     if getattr(args, "cluster", None) is not None:
-        from .runtime.cluster import check_scheduler, parse_cluster
+        from .runtime.cluster import parse_cluster
 
-        kind, _, _ = parse_cluster(args.cluster)
+        parse_cluster(args.cluster)
         if getattr(args, "workers", 0):
             raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
                             "workers do the work (give their number in local:N); leave --workers out")
-        if kind != "local":  # a scheduler must answer now, not after the scene is loaded
-            check_scheduler(args.cluster)
 
 
 def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:

@@ -16,7 +16,8 @@ from pathlib import Path
 from .. import __version__
 from ..errors import UserError
 from ..log import setup_logging
-from .options import add_plan_args, add_scene_args, plan_config_from_args, plan_inputs_in_scene_frame
+from .options import (add_plan_args, add_scene_args, check_cluster_answers, plan_config_from_args,
+                      plan_inputs_in_scene_frame)
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -105,6 +106,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     existing = load_markers(args.existing, "--existing") if args.existing else []
     check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
     check_output_dir(args.out)
+    check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
     offset = world_offset(scene)  # user inputs and outputs are in the file's frame

@@ -17,7 +17,7 @@ from typing import Sequence
 log = logging.getLogger(__name__)
 
 __all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
-           "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
+           "plan_config_for_budgets", "plan_inputs_in_scene_frame", "check_cluster_answers"]
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -58,6 +58,15 @@ def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None,
         estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
     check_run_size(estimate, force=force)
     return config
+
+
+def check_cluster_answers(args: argparse.Namespace) -> None:
+    """``--cluster tcp://...``: a Dask scheduler must answer there (connect and handshake within
+    seconds, :func:`markerplace.runtime.cluster.check_scheduler`) before the scene is loaded."""
+    if getattr(args, "cluster", None):
+        from ..runtime.cluster import check_scheduler
+
+        check_scheduler(args.cluster)
 
 
 def parse_level(text: str):

@@ -162,7 +162,9 @@ class InterruptGuard:
                 return
             self._announced = True
         try:
-            print(resume_message(signum, self.resumable), file=sys.stderr, flush=True)
+            tty = getattr(sys.stderr, "isatty", lambda: False)()
+            # on a terminal the line after the echoed ^C (or a progress bar), in a log file alone
+            print(("\n" if tty else "") + resume_message(signum, self.resumable), file=sys.stderr, flush=True)
         except Exception:  # stderr gone (a closed pipe): nothing to tell
             pass
 

@@ -47,7 +47,7 @@ def children_without_sigint() -> Iterator[None]:
     worker processes it spawns never get a ``KeyboardInterrupt``). A SIGINT arriving meanwhile
     is delivered to the main process as usual (another thread takes it, or the main thread when
     the block ends); nothing is lost."""
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
     # multiprocessing starts its resource tracker on first use and then UNBLOCKS SIGINT in the
@@ -73,7 +73,8 @@ def worker_signals(parent_pid: int | None = None) -> None:
         parent_pid: the main process's pid; a worker whose parent is already gone exits at once.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending SIGINT was just discarded
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending SIGINT was just discarded
     if not sys.platform.startswith("linux"):
         return
     try:
