@@ -5,7 +5,10 @@
 
 markerplace reads glTF, OBJ and PLY; IFC is what architects hand over. IfcOpenShell (the
 field's IFC library) turns every element's geometry into triangles in world coordinates; this
-script keeps each element as a glTF node named ``<IfcClass>_<id>`` with its material's colour,
+script keeps each element as a glTF node (and mesh) named ``<IfcClass>_<id>_<material>``
+(:func:`node_name`) with its material's colour: the class carries into the names ``plan`` reads,
+so no tag goes on an ``IfcWindow``, ``IfcDoor``, ``IfcCurtainWall`` or ``IfcFurnishingElement``
+(:mod:`markerplace.scene.semantics`),
 writes transparent materials (window glazing) with ``alphaMode`` BLEND so that ``plan`` treats
 them as glass (never a tag on them, free space bounded by them), leaves out opening volumes
 (``IfcOpeningElement``) and room volumes (``IfcSpace``), and turns IFC's z-up metres into
@@ -34,6 +37,12 @@ def _rgba(material) -> tuple[float, float, float, float]:
     transparency = getattr(material, "transparency", 0.0) or 0.0
     transparency = 0.0 if transparency != transparency else float(transparency)
     return (*np.clip(rgb, 0, 1), float(np.clip(1.0 - transparency, 0, 1)))
+
+
+def node_name(ifc_class: str, element_id: int, material: int) -> str:
+    """The glTF node and mesh name of one element's faces of one material: the IFC class first
+    (``IfcWindow_1234_0``), so that ``plan`` knows windows, doors and furniture by name."""
+    return f"{ifc_class}_{int(element_id)}_{int(material)}"
 
 
 def convert(src: str, dst: str) -> dict[str, int]:
@@ -67,7 +76,7 @@ def convert(src: str, dst: str) -> dict[str, int]:
                 part = trimesh.Trimesh(verts, faces[mids == m], process=False)
                 part.remove_unreferenced_vertices()
                 part.visual = trimesh.visual.TextureVisuals(material=mat)
-                name = f"{cls}_{shape.id}_{int(m)}"
+                name = node_name(cls, shape.id, m)
                 scene.add_geometry(part, node_name=name, geom_name=name, transform=GLTF_FROM_IFC)
         if not it.next():
             break

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 from markerplace.cli.main import main
 
+NEGATIVE_ZERO = re.compile(r"-0(\.0+)?(?![.\d])")
+"""-0, -0.0, -0.000 (not -0.057)."""
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 
 
@@ -17,6 +20,17 @@ def plan(tmp_path_factory):
     out = tmp_path_factory.mktemp("check") / "tiny"
     assert main(["plan", "tiny", "-k", "4", "--out", str(out), *FAST]) == 0
     return out
+
+
+def missing_marks(png) -> int:
+    """Pixels of the map in the colour of the missing-tag crosses."""
+    from PIL import Image
+
+    from markerplace.report.figures import MISSING_COLOR
+
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    rgb = [int(MISSING_COLOR[i:i + 2], 16) for i in (1, 3, 5)]
+    return int((np.abs(img - rgb).sum(axis=2) < 30).sum())
 
 
 def markers_of(plan):
@@ -52,7 +66,9 @@ def test_installed_as_planned_loses_nothing(plan, tmp_path, capsys):
     assert abs(report["summary"]["mean_score_lost"]) < 1e-6
     scores = np.load(plan / "scores.npz")
     assert report["summary"]["mean_score_planned"] == pytest.approx(scores["score_after"].mean(), abs=1e-9)
-    assert "no camera location lost anything" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "no camera location lost anything" in text and not NEGATIVE_ZERO.search(text)
+    assert missing_marks(out / "check_map.png") == 0
 
 
 def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
@@ -83,7 +99,9 @@ def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
     assert [r["status"] for r in report["tags"]] == ["shifted", "missing", "swapped", "swapped", "extra"]
     r1 = rows[1, "shifted"]
     assert r1["shift_m"] == pytest.approx(0.3, abs=2e-4) and r1["shift_deg"] < 0.1
-    assert "move it 0.30 m" in r1["note"]
+    # hung 0.3 m along the marker's +x (to the right as you face the wall): move it back to the left
+    assert r1["note"] == "move it 0.30 m left (as you face the wall)", r1["note"]
+    assert r1["move"]["right_m"] == pytest.approx(-0.3, abs=2e-4) and abs(r1["move"]["up_m"]) < 1e-4
     r2 = rows[2, "missing"]
     assert r2["installed_id"] is None and r2["score_lost"] > 0 and r2["score_lost_seen"] > r2["score_lost"]
     for order, (mine, theirs) in ((3, (c, d)), (4, (d, c))):
@@ -100,10 +118,36 @@ def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
     assert worst and worst[0]["score_lost"] > 0 and worst[0]["storey"] == 0
     assert [w["score_lost"] for w in worst] == sorted((w["score_lost"] for w in worst), reverse=True)
     assert "camera locations that lost most" in text and f"storey 0 (floor 0.00 m) at ({worst[0]['x']:.2f}" in text
-    assert (out / "check_map.png").stat().st_size > 0
+    for written in (text, (out / "check.csv").read_text(), (out / "check.json").read_text()):
+        assert not NEGATIVE_ZERO.search(written), NEGATIVE_ZERO.search(written)
+    assert missing_marks(out / "check_map.png") > 0  # the missing tag is marked on the map
     assert len((out / "check.csv").read_text().strip().splitlines()) == 1 + 5
     layout = json.loads((out / "tagmaps" / "wpilib_field_layout.json").read_text())
     assert sorted(t["ID"] for t in layout["tags"]) == sorted([a["tag_id"], c["tag_id"], d["tag_id"], 50])
+
+
+def test_directions_in_the_installers_terms():
+    """Hand-made installed poses against a planned one on a wall facing +y: the words say how to
+    move and turn the tag as a person facing the wall sees it (their right is the wall's -x)."""
+    from markerplace.geometry import world_from_marker_pose
+    from markerplace.plan.check import correction, directions
+
+    P = world_from_marker_pose(np.array([2.0, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]))
+    x_right = P[:3, 0]
+    assert np.allclose(x_right, [-1, 0, 0])  # facing the wall (looking along -y), right is -x
+    hung = world_from_marker_pose(np.array([2.2, 0.03, 1.4]), np.array([0.0, 1.0, 0.0]))  # 0.2 m to the left, low, proud
+    assert directions(correction(P, hung)) == "move it 0.20 m right and 0.10 m up and 0.03 m into the wall (as you face the wall)"
+    turned = P.copy()
+    a = np.radians(90)  # rotated 90 deg counter-clockwise on the wall (as seen facing it)
+    turned[:3, :3] = P[:3, :3] @ np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    assert directions(correction(P, turned)) == "turn it 90 deg clockwise (as you face the wall)"
+    upside = P.copy()
+    upside[:3, :2] *= -1
+    assert "upside down" in directions(correction(P, upside))
+    yawed = world_from_marker_pose(np.array([2.0, 0.0, 1.5]), np.array([np.sin(np.radians(-10)), np.cos(np.radians(10)), 0]))
+    words = directions(correction(P, yawed))
+    assert "faces 10 deg to your right" in words, words  # its normal turned towards -x: the person's right
+    assert directions(correction(P, P)) == ""
 
 
 @pytest.mark.parametrize("case, message", [

@@ -55,7 +55,7 @@ def test_marker_frame_right_handed_and_facing_normal():
     cam = g.world_from_cam_pose([0, 0, 1.5], 0.0)
     corners = g.transform_points(T, g.marker_corners_local(0.4))
     uv, _ = g.project(g.Intrinsics().K, cam, corners)
-    tl, tr, br, bl = uv
+    bl, br, tr, tl = uv  # the detector's order (AprilTag library)
     assert tr[0] > tl[0] and br[0] > bl[0] and bl[1] > tl[1] and br[1] > tr[1]
     with pytest.raises(ValueError):
         g.world_from_marker_pose([0, 0, 0], [0, 0, 1])

@@ -38,3 +38,24 @@ def test_without_ifcopenshell_one_line_error_and_exit_2(ifc_to_glb, monkeypatch,
     assert ifc_to_glb.main([str(tmp_path / "a.ifc"), str(tmp_path / "a.glb")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install ifcopenshell" in err[0]
+
+
+def test_ifc_classes_carry_into_the_names_plan_reads(ifc_to_glb, tmp_path):
+    """Nodes named as convert() names them, written and read back by the loader: the IFC class
+    tells windows, doors and furniture from walls (no IfcOpenShell needed for this part)."""
+    import trimesh
+
+    from markerplace.scene.loader import load_mesh_file
+    from markerplace.scene.semantics import classify
+
+    scene = trimesh.Scene()
+    classes = {"IfcWallStandardCase": "structure", "IfcWindow": "windows", "IfcDoor": "doors",
+               "IfcCurtainWall": "windows", "IfcFurnishingElement": "furniture", "IfcSlab": ""}
+    for i, cls in enumerate(classes):
+        box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+        box.apply_translation((2.0 * i, 0.0, 0.0))
+        name = ifc_to_glb.node_name(cls, 100 + i, 0)
+        scene.add_geometry(box, node_name=name, geom_name=name, transform=ifc_to_glb.GLTF_FROM_IFC)
+    scene.export(tmp_path / "model.glb")
+    parts = load_mesh_file(tmp_path / "model.glb").parts
+    assert {p.name.split("_")[0]: classify(p.names).category for p in parts} == classes

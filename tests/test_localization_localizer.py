@@ -19,6 +19,7 @@ from markerplace.localization.localizer import Localizer, LocalizerConfig
 from markerplace.localization.pnp import pose_errors
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
+from official_tags import official_square
 
 INTR = Intrinsics()
 K = INTR.K
@@ -54,7 +55,7 @@ def _make_world() -> tuple[list[Wall], Marker]:
     # paste a 0.5 m tag (plus a white quiet zone) into the back wall's texture
     size = int(0.5 * PX_PER_M)
     u0, v0 = int(3.6 * PX_PER_M), int(0.8 * PX_PER_M)
-    tag = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11), TAG_ID, size, borderBits=1)
+    tag = official_square(TAG_ID, size)  # the official image, top edge up
     q = size // 6
     back.tex[v0 - q : v0 + size + q, u0 - q : u0 + size + q] = 255
     back.tex[v0 : v0 + size, u0 : u0 + size] = tag[:, :, None]

@@ -10,6 +10,7 @@ from markerplace.geometry import Intrinsics, invert, project, so3_exp, world_fro
 from markerplace.localization.pnp import PnPConfig, estimate_pose, pose_errors
 from markerplace.localization.tags import TagDetection, detect_tags, pose_from_tag
 from markerplace.markers import Marker
+from official_tags import official_square
 
 INTR = Intrinsics()
 K = INTR.K
@@ -103,40 +104,37 @@ def test_pose_errors_formulas():
 
 # ---- tags -----------------------------------------------------------------------------------
 
-TAG_DICT = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
-
-
 def _tag_image(tag_id: int, size: int, pad: int) -> tuple[np.ndarray, np.ndarray]:
-    """White-padded tag image and its black-square corners (TL, TR, BR, BL), OpenCV pixels."""
-    img = cv2.aruco.generateImageMarker(TAG_DICT, tag_id, size, borderBits=1)
-    img = cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
+    """White-padded official tag image (apriltag-imgs) and its black-square corners in the
+    detector's order as printed (BL, BR, TR, TL), OpenCV pixels."""
+    img = cv2.copyMakeBorder(official_square(tag_id, size), pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
     lo, hi = pad - 0.5, pad + size - 0.5  # outer edges of the black square
-    return img, np.array([[lo, lo], [hi, lo], [hi, hi], [lo, hi]])
+    return img, np.array([[lo, hi], [hi, hi], [hi, lo], [lo, lo]])
 
 
 def test_detect_tag_plain_and_rotated():
-    img, corners = _tag_image(7, 200, 100)
+    img, corners = _tag_image(3, 200, 100)
     dets = detect_tags(img)
-    assert [d.tag_id for d in dets] == [7]
+    assert [d.tag_id for d in dets] == [3]
     np.testing.assert_allclose(dets[0].corners, corners, atol=1.0)
     np.testing.assert_allclose(dets[0].center, corners.mean(0), atol=1.0)
     # rotating the printed image by 90 degrees (counter-clockwise) rotates the tag's own corners:
-    # the printed TL corner moves to the image's bottom-left
+    # the printed bottom-left corner moves to the image's bottom-right
     rot = np.ascontiguousarray(np.rot90(img))
     n = img.shape[0]
     rot_corners = np.stack([corners[:, 1], n - 1 - corners[:, 0]], axis=1)
     det = detect_tags(cv2.cvtColor(rot, cv2.COLOR_GRAY2RGB))[0]
     np.testing.assert_allclose(det.corners, rot_corners, atol=1.0)
-    assert det.corners[0, 0] < 200 and det.corners[0, 1] > 250  # TL now bottom-left in the image
+    assert det.corners[0, 0] > 250 and det.corners[0, 1] > 250  # printed BL now bottom-right in the image
 
 
 def test_detect_tag_perspective_warp():
-    img, corners = _tag_image(23, 400, 200)
-    dst = np.array([[150.3, 80.7], [420.2, 110.1], [400.6, 330.4], [170.9, 360.2]], np.float32)
+    img, corners = _tag_image(101, 400, 200)
+    dst = np.array([[170.9, 360.2], [400.6, 330.4], [420.2, 110.1], [150.3, 80.7]], np.float32)  # BL, BR, TR, TL
     H = cv2.getPerspectiveTransform(corners.astype(np.float32), dst)
     warped = cv2.warpPerspective(img, H, (INTR.width, INTR.height), flags=cv2.INTER_LINEAR, borderValue=255)
     dets = detect_tags(np.dstack([warped] * 3))
-    assert [d.tag_id for d in dets] == [23]
+    assert [d.tag_id for d in dets] == [101]
     np.testing.assert_allclose(dets[0].corners, dst, atol=1.0)
 
 
@@ -162,14 +160,14 @@ def test_pose_from_tag_recovers_pose(yaw_deg, normal):
 def test_pose_from_tag_on_rendered_tag():
     """Render a tag on a wall by its exact homography, detect it and recover the camera pose."""
     size_px, pad = 400, 200
-    img, corners_px = _tag_image(11, size_px, pad)
-    marker = Marker(11, 0.4, world_from_marker_pose(np.array([0.0, 3.0, 1.5]), np.array([0.0, -1.0, 0.0])))
+    img, corners_px = _tag_image(17, size_px, pad)
+    marker = Marker(17, 0.4, world_from_marker_pose(np.array([0.0, 3.0, 1.5]), np.array([0.0, -1.0, 0.0])))
     T = world_from_cam_pose(np.array([0.5, 0.5, 1.3]), np.radians(100.0))
     uv, _ = project(K, T, marker.corners_world())
     H = cv2.getPerspectiveTransform(corners_px.astype(np.float32), uv.astype(np.float32))
     warped = cv2.warpPerspective(img, H, (INTR.width, INTR.height), flags=cv2.INTER_LINEAR, borderValue=255)
     dets = detect_tags(warped)
-    assert [d.tag_id for d in dets] == [11]
+    assert [d.tag_id for d in dets] == [17]
     np.testing.assert_allclose(dets[0].corners, uv, atol=1.0)
     dt, dr = pose_errors(pose_from_tag(dets[0], marker, K), T)
     assert dt < 0.05 and dr < 2.0, (dt, dr)

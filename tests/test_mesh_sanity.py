@@ -3,6 +3,7 @@ NaN/inf vertices, a wrong up axis, a model far from the origin, --existing marke
 walls, a non-UTF-8 OBJ, a .gltf with a missing texture, a missing --placements folder."""
 
 import base64
+import csv
 import json
 import logging
 
@@ -91,8 +92,8 @@ def test_far_model_is_recentred_and_plans_like_at_the_origin(meshes, tmp_path):
         assert np.allclose(ma["normal"], mb["normal"], atol=1e-3)
         Ta, Tb = np.array(ma["world_from_marker"]), np.array(mb["world_from_marker"])
         assert np.allclose(Ta[:3, 3] + FAR, Tb[:3, 3], atol=2e-3) and np.allclose(Ta[:3, :3], Tb[:3, :3], atol=1e-3)
-    rows = (outs["far_glb"] / "placement.csv").read_text().splitlines()
-    x = float(rows[1].split(",")[4])
+    rows = list(csv.DictReader((outs["far_glb"] / "placement.csv").open()))
+    x = float(rows[0]["x"])
     assert abs(x - b[0]["position"][0]) < 1e-3 and x > 0.9e6
     sa, sb = np.load(outs["glb"] / "scores.npz"), np.load(outs["far_glb"] / "scores.npz")
     assert np.allclose(sa["world_from_cam"][:, :3, 3] + FAR, sb["world_from_cam"][:, :3, 3], atol=2e-3)

@@ -33,16 +33,35 @@ def test_log_progress_writes_a_line_per_interval_and_a_closing_line(caplog):
     ]
 
 
-def test_log_progress_rate_counts_only_this_runs_items(caplog):
+def test_log_progress_rate_counts_only_this_runs_items_after_start_up(caplog):
     clock = _Clock()
     caplog.set_level(logging.INFO, logger="markerplace")
-    bar = LogProgress(100, "observe", "pose", initial=50, interval_s=10.0, clock=clock)
+    bar = LogProgress(100, "observe", "pose", initial=40, interval_s=10.0, clock=clock)
+    clock.t += 30.0
+    bar.update(10)  # the first chunk after 30 s of worker start-up: not in the rate
     clock.t += 10.0
-    bar.update(20)  # 20 poses in 10 s, 30 left -> 15 s
+    bar.update(20)  # 20 poses in 10 s, 30 left -> 15 s (with the start-up in the rate: 30 s)
     bar.close()
     bar.close()  # once only
     msgs = [r.getMessage() for r in caplog.records]
-    assert msgs == ["observe: 70/100 pose (70 %), 2.0 pose/s, about 15 s left", "observe: 70/100 pose in 10 s"]
+    assert msgs == ["observe: 70/100 pose (70 %), 2.0 pose/s, about 15 s left", "observe: 70/100 pose in 40 s"]
+
+
+def test_terminal_bar_time_left_excludes_start_up(monkeypatch):
+    """The first estimate of the time left on a terminal is not inflated by start-up: after a
+    slow first item the bar's rate comes from the items that follow it."""
+    from markerplace import progress as progress_mod
+
+    monkeypatch.setattr(progress_mod.sys, "stderr", _Tty())
+    with progress_mod.progress_bar(1000, "observe", "pose") as bar:
+        bar.start_t -= 100.0  # 100 s of start-up before the first pose
+        bar.update(1)
+        bar.last_print_t -= 1.0  # then 10 poses in one second
+        bar.start_t -= 1.0
+        bar.update(10)
+        fmt = bar.format_dict
+        rate = fmt["rate"] or (fmt["n"] - fmt["initial"]) / fmt["elapsed"]
+    assert rate > 5.0, fmt  # with the start-up in it: about 0.1 pose/s
 
 
 def test_a_resumed_stage_with_nothing_left_logs_nothing(caplog):

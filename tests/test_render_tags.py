@@ -11,7 +11,7 @@ from markerplace.markers import Marker
 from markerplace.render import gl_resources
 from markerplace.render.renderer import Renderer
 from markerplace.localization.tags import make_detector
-from markerplace.render.tags import PUPIL_TO_MARKER_CORNERS, QUIET_BITS, TAG_BITS, outer_size, tag_image
+from markerplace.render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
 from markerplace.scene.types import MeshPart, Scene
 
 K = Intrinsics().K
@@ -49,7 +49,7 @@ def test_tag_image_rejects_bad_id():
 
 
 @pytest.mark.parametrize("tag_id", [0, 13, 586])
-def test_opencv_images_decode_as_same_pupil_id(detector, tag_id):
+def test_tag_images_decode_as_same_pupil_id(detector, tag_id):
     img = np.pad(tag_image(tag_id, pixels_per_bit=10), 20, constant_values=255)
     dets = detector.detect(img)
     assert [d.tag_id for d in dets] == [tag_id]
@@ -74,12 +74,12 @@ def test_rendered_marker_detected_with_right_id_and_corners(detector, tag_id, si
     assert [d.tag_id for d in dets] == [tag_id]
     expected, _ = project(K, pose, marker.corners_world())
     got = np.asarray(dets[0].corners)
-    # Documented corner mapping, then every corner within 1 px.
-    err = np.linalg.norm(got - expected[list(PUPIL_TO_MARKER_CORNERS)], axis=1)
+    # The detector's corners pair with marker_corners_local by index (no permutation), each
+    # within 1 px, and an order-free nearest match agrees.
+    err = np.linalg.norm(got - expected, axis=1)
     assert err.max() < 1.0, err
-    # Same as an order-free nearest match (the mapping is not hiding a swap).
     d = np.linalg.norm(got[:, None] - expected[None], axis=2)
-    assert list(d.argmin(axis=1)) == list(PUPIL_TO_MARKER_CORNERS)
+    assert list(d.argmin(axis=1)) == [0, 1, 2, 3]
 
 
 def test_missing_egl_raises_user_error_with_hint(monkeypatch):

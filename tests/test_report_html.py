@@ -81,13 +81,13 @@ def test_tag_near_a_door_reports_the_door_edge(caster):
     # on the east wall (faces west), 0.9 m south of the door's south jamb at y = 1.5
     place = describe_tag(caster, np.array([5.0, 0.6, 1.5]), np.array([-1.0, 0.0, 0.0]), 0.0)
     assert place.wall == "east"
-    assert place.left.kind == "edge" and place.left.distance == pytest.approx(0.9, abs=0.02)  # north = left
+    assert place.left.kind == "door edge" and place.left.distance == pytest.approx(0.9, abs=0.02)  # north = left
     assert place.right.kind == "corner" and place.right.distance == pytest.approx(0.6, abs=0.02)
     assert place.nearest[0] == "right"
     place = describe_tag(caster, np.array([5.0, 3.3, 1.5]), np.array([-1.0, 0.0, 0.0]), 0.0)
     side, end = place.nearest  # 0.9 m north of the door's north jamb at y = 2.4, 0.7 m from the corner
     assert side == "left" and end.kind == "corner" and end.distance == pytest.approx(0.7, abs=0.02)
-    assert place.right.kind == "edge" and place.right.distance == pytest.approx(0.9, abs=0.02)
+    assert place.right.kind == "door edge" and place.right.distance == pytest.approx(0.9, abs=0.02)
 
 
 def test_a_picture_does_not_end_the_wall_and_a_tilted_normal_is_fitted(caster):
@@ -100,11 +100,16 @@ def test_a_picture_does_not_end_the_wall_and_a_tilted_normal_is_fitted(caster):
     assert abs(place.normal[1] + 1.0) < 1e-3  # the wall's own normal, not the given one
 
 
-def test_height_above_a_raised_floor():
-    stage = box("stage", (0, 0, 0), (5, 1.5, 0.2))  # a 0.2 m platform along the south wall
+def test_height_is_above_the_floor_given_not_the_furniture():
+    # a 0.75 m dining table against the south wall: the height is above the floor the plan gives
+    table = box("table", (1.5, 0.0, 0.72), (3.5, 0.9, 0.75))
+    rc = RayCaster(*room_scene([table]).geometry())
+    place = describe_tag(rc, np.array([2.5, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]), 0.0)
+    assert place.floor_z == 0.0 and place.height == pytest.approx(1.5)
+    stage = box("stage", (0, 0, 0), (5, 1.5, 0.2))  # a 0.2 m platform along the south wall: its floor is given
     rc = RayCaster(*room_scene([stage]).geometry())
-    place = describe_tag(rc, np.array([2.5, 0.0, 1.7]), np.array([0.0, 1.0, 0.0]), 0.0)
-    assert place.floor_z == pytest.approx(0.2, abs=0.01) and place.height == pytest.approx(1.5, abs=0.01)
+    place = describe_tag(rc, np.array([2.5, 0.0, 1.7]), np.array([0.0, 1.0, 0.0]), 0.2)
+    assert place.floor_z == pytest.approx(0.2) and place.height == pytest.approx(1.5)
 
 
 def test_installer_camera_stays_in_free_space():
@@ -179,18 +184,58 @@ def check_page(driver, path: Path) -> dict:
     return {"images": [alt for alt, *_ in images], "text": driver.find_element("tag name", "body").text}
 
 
-def test_plan_report_in_browser(tmp_path_factory, browser, capsys):
+@pytest.fixture(scope="module")
+def tiny_plan(tmp_path_factory):
     out = tmp_path_factory.mktemp("plan_report")
     assert main(["plan", "tiny", "-k", "2", "--out", str(out), *FAST]) == 0
-    assert f"wrote {out / 'report.html'}" in capsys.readouterr().out
+    return out
+
+
+def test_plan_report_in_browser(tiny_plan, browser):
+    out = tiny_plan
     page = check_page(browser, out / "report.html")
     alts = page["images"]
     assert {"placement.png", "scores.png"} <= set(alts)
     assert sum("close view" in a for a in alts) == 2 and sum("wide view" in a for a in alts) == 2
     assert "Scores before and after" in page["text"] and "10th percentile" in page["text"]
-    assert page["text"].count(" m above the floor in front of it") == 2
-    assert re.search(r"\d\.\d\d m from the (corner|edge of its surface) on its (left|right)", page["text"])
+    assert page["text"].count(" m above the floor (the middle of the black square") == 2
+    assert re.search(r"\d\.\d\d m from the (corner|door edge|end of the wall) on the (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
+    assert page["text"].count("On the wall (model part tiny/wall/") == 2  # what each tag is on
+
+
+def test_reject_buttons_download_a_file_that_plan_exclude_accepts(tiny_plan, browser, tmp_path, capsys):
+    """Reject tag #1, reject and un-reject #2: the download link holds #1's spot only, and a
+    replan with it (from the cached stages) leaves that spot free."""
+    import json
+    import shutil
+    from urllib.parse import unquote
+
+    browser.get((tiny_plan / "report.html").resolve().as_uri())
+    buttons = browser.find_elements("css selector", "button.mp-reject")
+    assert len(buttons) == 2
+    link = browser.find_element("id", "mp-rejected-download")
+    assert link.get_attribute("aria-disabled") == "true"
+    buttons[0].click()
+    buttons[1].click()
+    buttons[1].click()
+    assert "Rejected" in buttons[0].text and buttons[1].text == "Reject this spot"
+    assert browser.find_element("id", "mp-rejected-count").text == "1"
+    href = link.get_attribute("href")
+    assert href.startswith("data:application/json") and link.get_attribute("download") == "rejected.json"
+    doc = json.loads(unquote(href.split(",", 1)[1]))
+    first = json.loads((tiny_plan / "placement.json").read_text())["markers"][0]
+    assert [s["order"] for s in doc["spots"]] == [1] and doc["scene"] == "tiny"
+    assert [doc["spots"][0][k] for k in "xyz"] == pytest.approx(first["position"])
+    rejected = tmp_path / "rejected.json"
+    rejected.write_text(json.dumps(doc))
+    replan = tmp_path / "replan"
+    shutil.copytree(tiny_plan, replan)
+    capsys.readouterr()
+    assert main(["plan", "tiny", "-k", "2", "--out", str(replan), "--exclude", str(rejected), *FAST]) == 0
+    assert "changes against the previous placement.json" in capsys.readouterr().out
+    after = json.loads((replan / "placement.json").read_text())["markers"]
+    assert all(np.linalg.norm(np.array(m["position"]) - first["position"]) > doc["spots"][0]["radius"] for m in after)
 
 
 def test_evaluate_report_in_browser(tmp_path_factory, browser):

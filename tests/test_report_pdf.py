@@ -3,8 +3,6 @@ reassembled from their pages by the tiling geometry."""
 
 from __future__ import annotations
 
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +12,7 @@ from markerplace.errors import UserError
 from markerplace.render.tags import outer_size
 from markerplace.report.pdf import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout, write_tags_pdf
 from markerplace.report.printable import caption_for
+import printed_tags
 
 DPI = 300
 PX_PER_MM = DPI / 25.4
@@ -25,12 +24,7 @@ def record(order, tag_id, size):
 
 
 def rasterize(pdf: Path, out: Path, dpi: int = DPI) -> list[np.ndarray]:
-    """Grey pages of ``pdf`` at ``dpi`` (pdftoppm, anti-aliased as a screen or printer would)."""
-    assert shutil.which("pdftoppm"), "pdftoppm missing: scripts/setup.sh installs poppler-utils"
-    subprocess.run(["pdftoppm", "-r", str(dpi), "-gray", str(pdf), str(out / "p")], check=True)
-    from PIL import Image
-
-    return [np.asarray(Image.open(p)) for p in sorted(out.glob("p-*.pgm"))]
+    return printed_tags.rasterize(pdf, out, dpi)
 
 
 def black_bbox_mm(img: np.ndarray) -> tuple[float, float]:
@@ -50,8 +44,7 @@ def detect(img: np.ndarray, shrink: int = 1) -> list[int]:
 
 
 def crop_mm(img: np.ndarray, x: float, y: float, w: float, h: float) -> np.ndarray:
-    r0, c0 = int(round(y * PX_PER_MM)), int(round(x * PX_PER_MM))
-    return img[r0:r0 + int(round(h * PX_PER_MM)), c0:c0 + int(round(w * PX_PER_MM))]
+    return printed_tags.crop_mm(img, PX_PER_MM, x, y, w, h)
 
 
 @pytest.fixture(scope="module")
@@ -91,15 +84,11 @@ def test_tiled_tag_reassembles_exactly_and_is_detected(a4_pages):
         assert t.page_origin[0] >= MARGIN_MM - 1e-9 and t.page_origin[1] >= MARGIN_MM - 1e-9
         assert t.page_origin[0] + x1 - x0 <= lay.page[0] - MARGIN_MM + 1e-9
         assert detect(img) == []  # no tile alone is a tag
-    n = int(round(lay.edge * PX_PER_MM))
-    canvas = np.full((n, n), 255, np.uint8)
+    canvas = printed_tags.tape_tiles(lay, {t.name: img for t, img in zip(lay.tiles, tiles)}, PX_PER_MM)
     crops = {}
     for t, img in zip(lay.tiles, tiles):
         x0, y0, x1, y1 = t.region
-        crop = crop_mm(img, *t.page_origin, x1 - x0, y1 - y0)
-        crops[t.row, t.col] = crop
-        r0, c0 = int(round(y0 * PX_PER_MM)), int(round(x0 * PX_PER_MM))
-        canvas[r0:r0 + crop.shape[0], c0:c0 + crop.shape[1]] = crop[: n - r0, : n - c0]
+        crops[t.row, t.col] = crop_mm(img, *t.page_origin, x1 - x0, y1 - y0)
     # shared strips print the same content (pattern and crosshairs) on both neighbours
     ov = int(lay.overlap * PX_PER_MM) - 2
     for (r, c), crop in crops.items():

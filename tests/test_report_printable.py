@@ -61,10 +61,19 @@ def test_svg_has_physical_size_and_detects_as_its_id(tag_id, size) -> None:
 def test_write_tag_sheets_names_captions_and_cleanup(tmp_path) -> None:
     rec = dict(order=3, tag_id=17, family="tag36h11", size=0.4, position=[1.0, 2.5, 1.5], yaw_deg=90.0)
     assert caption_for(rec) == ["#3  tag36h11 id 17  black square 400 mm",
-                                "tag centre (1.00, 2.50, 1.50) m, facing 90 deg", "this side down"]
+                                "tag centre (1.00, 2.50, 1.50) m, facing 90 deg", "this edge down"]
+    install = {"storey": 1, "room": "study", "wall": "north", "facing": "south", "surface": "wall", "height_m": 1.5,
+               "measure_from": "right", "left": {"reference": "corner", "distance_m": 2.0},
+               "right": {"reference": "door edge", "distance_m": 0.45}}
+    assert caption_for({**rec, "install": install}) == [
+        "#3  tag36h11 id 17  black square 400 mm", "storey 1, north wall of the study (faces south)",
+        "centre 1.50 m above the floor; 0.45 m from the door edge on the right", "this edge down"]
     (tmp_path / "tags").mkdir()
-    (tmp_path / "tags" / "01_tag5.svg").write_text("stale")
+    (tmp_path / "tags" / "logo.svg").write_text("someone else's drawing")
+    write_tag_sheets(tmp_path / "tags", [{**rec, "order": 1, "tag_id": 5}])  # an earlier plan's sheet
     paths = write_tag_sheets(tmp_path / "tags", [rec, {**rec, "order": 4, "tag_id": 18}])
     assert [p.name for p in paths] == ["03_tag17.svg", "04_tag18.svg"]
-    assert sorted(p.name for p in (tmp_path / "tags").iterdir()) == ["03_tag17.svg", "04_tag18.svg"]
+    # the earlier plan's sheet is gone, a file markerplace did not write stays
+    assert sorted(p.name for p in (tmp_path / "tags").iterdir()) == ["03_tag17.svg", "04_tag18.svg", "logo.svg"]
+    assert (tmp_path / "tags" / "logo.svg").read_text() == "someone else's drawing"
     assert re.search(r"#4  tag36h11 id 18", paths[1].read_text())

@@ -1,5 +1,6 @@
-"""Tag maps (WPILib, apriltag_ros, TagSLAM): read each back with a JSON/YAML parser and the
-formats' own conventions, and recover every world_from_marker to 1e-9."""
+"""Tag maps (WPILib, apriltag_ros ROS 1 and ROS 2, TagSLAM): read each back with a JSON/YAML
+parser (WPILib's with robotpy-apriltag's own AprilTagFieldLayout) and the formats' own
+conventions, and recover every world_from_marker to 1e-9."""
 
 from __future__ import annotations
 
@@ -72,6 +73,32 @@ def read_tagslam(path):
     return out
 
 
+def read_ros2(folder, suffix=""):
+    """{id: (size, map_from_tag)} from the ROS 2 parameter file and the static-transform launch
+    file, as the apriltag node and tf2_ros' static_transform_publisher read them."""
+    params = yaml.safe_load((folder / f"ros2_apriltag_params{suffix}.yaml").read_text())
+    p = params["/**"]["ros__parameters"]
+    assert p["family"] == "36h11" and p["pose_estimation_method"] == "pnp"
+    tag = p["tag"]
+    assert len(tag["ids"]) == len(tag["frames"]) == len(tag["sizes"])
+    launch = yaml.safe_load((folder / f"ros2_tag_transforms{suffix}.launch.yaml").read_text())["launch"]
+    known = {}
+    for entry in launch:
+        node = entry["node"]
+        assert node["pkg"] == "tf2_ros" and node["exec"] == "static_transform_publisher"
+        a = node["args"].split()
+        kv = dict(zip(a[0::2], a[1::2]))
+        assert kv["--frame-id"] == "map"
+        known[kv["--child-frame-id"]] = pose(quat_to_matrix(*(float(kv[k]) for k in ("--qw", "--qx", "--qy", "--qz"))),
+                                             [float(kv[k]) for k in ("--x", "--y", "--z")])
+    out = {}
+    for i, frame, size in zip(tag["ids"], tag["frames"], tag["sizes"]):
+        assert frame == f"tag36h11_{i}"
+        out[i] = (size, known[f"map_{frame}"])
+    assert len(known) == len(out)
+    return out
+
+
 def random_markers(rng, n=12, offset=(0.0, 0.0, 0.0)):
     ms = []
     for i in range(n):
@@ -95,16 +122,38 @@ def test_every_format_recovers_world_from_marker(tmp_path, offset):
     rng = np.random.default_rng(3)
     markers = random_markers(rng, offset=offset)
     paths = write_tag_maps(tmp_path, markers, name="office", field=(12.5, 8.0))
-    assert sorted(p.name for p in paths) == ["apriltag_ros_bundle.yaml", "tagslam_tags.yaml", "wpilib_field_layout.json"]
+    assert sorted(p.name for p in paths) == ["apriltag_ros_bundle.yaml", "ros2_apriltag_params.yaml",
+                                             "ros2_tag_transforms.launch.yaml", "tagslam_tags.yaml",
+                                             "wpilib_field_layout.json"]
     wp, field = read_wpilib(tmp_path / "wpilib_field_layout.json")
     ar = read_apriltag_ros(tmp_path / "apriltag_ros_bundle.yaml")
     ts = read_tagslam(tmp_path / "tagslam_tags.yaml")
+    r2 = read_ros2(tmp_path)
     assert field == {"length": 12.5, "width": 8.0}
     for m in markers:
         T = m.world_from_marker
         assert np.abs(wp[m.tag_id] - T).max() < 1e-9
         assert ar[m.tag_id][0] == m.size and np.abs(ar[m.tag_id][1] - T).max() < 1e-9
         assert ts[m.tag_id][0] == m.size and np.abs(ts[m.tag_id][1] - T).max() < 1e-9
+        assert r2[m.tag_id][0] == m.size and np.abs(r2[m.tag_id][1] - T).max() < 1e-9
+
+
+def test_wpilib_layout_loads_in_robotpy_apriltag(tmp_path):
+    """WPILib's own AprilTagFieldLayout (robotpy-apriltag) reads the file: same ids, field and
+    poses (WPILib's tag frame, x out of the face, z up) to 1e-9."""
+    import robotpy_apriltag
+
+    rng = np.random.default_rng(4)
+    markers = random_markers(rng, n=6, offset=(3.0, 2.0, 0.0))
+    write_tag_maps(tmp_path, markers, name="office", field=(12.5, 8.0))
+    layout = robotpy_apriltag.AprilTagFieldLayout(str(tmp_path / "wpilib_field_layout.json"))
+    assert layout.getFieldLength() == pytest.approx(12.5) and layout.getFieldWidth() == pytest.approx(8.0)
+    assert sorted(t.ID for t in layout.getTags()) == sorted(m.tag_id for m in markers)
+    for m in markers:
+        p = layout.getTagPose(m.tag_id)
+        q = p.rotation().getQuaternion()
+        W = pose(quat_to_matrix(q.W(), q.X(), q.Y(), q.Z()), [p.X(), p.Y(), p.Z()])
+        assert np.abs(W - m.world_from_marker @ MARKER_FROM_WPILIB).max() < 1e-9
 
 
 def test_wpilib_tag_frame_faces_out_of_the_wall(tmp_path):
@@ -126,13 +175,14 @@ def test_file_axes_maps_for_a_y_up_model(tmp_path):
     markers = random_markers(rng, n=6)
     R = up_rotation("y")  # glTF: world_from_file
     paths = write_tag_maps(tmp_path, markers, name="scan", field=(3.0, 4.0), world_from_file=R)
-    assert len(paths) == 6
+    assert len(paths) == 10
     F = pose(R, [0, 0, 0])  # world_from_file as a pose
     wp, _ = read_wpilib(tmp_path / "wpilib_field_layout_yup.json")
     ar = read_apriltag_ros(tmp_path / "apriltag_ros_bundle_yup.yaml")
     ts = read_tagslam(tmp_path / "tagslam_tags_yup.yaml")
+    r2 = read_ros2(tmp_path, "_yup")
     for m in markers:
-        for T_file in (wp[m.tag_id], ar[m.tag_id][1], ts[m.tag_id][1]):
+        for T_file in (wp[m.tag_id], ar[m.tag_id][1], ts[m.tag_id][1], r2[m.tag_id][1]):
             assert np.abs(F @ T_file - m.world_from_marker).max() < 1e-9
         # in y-up axes the height is the file's +y
         assert ar[m.tag_id][1][1, 3] == pytest.approx(m.world_from_marker[2, 3], abs=1e-12)
@@ -143,3 +193,4 @@ def test_empty_plan_writes_valid_files(tmp_path):
     assert read_wpilib(tmp_path / "wpilib_field_layout.json")[0] == {}
     assert read_tagslam(tmp_path / "tagslam_tags.yaml") == {}
     assert read_apriltag_ros(tmp_path / "apriltag_ros_bundle.yaml") == {}
+    assert yaml.safe_load((tmp_path / "ros2_tag_transforms.launch.yaml").read_text()) == {"launch": []}

@@ -13,3 +13,16 @@ class UserError(Exception):
 
     def __init__(self, message: str):
         super().__init__(" ".join(str(message).split()))
+
+
+def write_error(path, err: OSError) -> Exception:
+    """A :class:`UserError` (one line) for a write that failed on a full disk, a quota, a
+    read-only file system or a permission; ``err`` itself for any other error."""
+    import errno
+    import os
+
+    if err.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
+        return err
+    hint = "free some space" if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else "make it writable"
+    return UserError(f"cannot write {path}: {os.strerror(err.errno)}; {hint} or choose another folder, then run "
+                     "again (the stages already done are reused)")

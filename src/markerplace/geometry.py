@@ -123,11 +123,13 @@ def world_from_marker_pose(center: np.ndarray, normal: np.ndarray) -> np.ndarray
 def marker_corners_local(size: float) -> np.ndarray:
     """(4, 3) corners of the black square in the marker frame, metres.
 
-    Order: top-left, top-right, bottom-right, bottom-left as seen by a facing viewer (the order
-    OpenCV's ArUco detector reports).
+    Order: bottom-left, bottom-right, top-right, top-left as seen by a facing viewer: the order
+    of the AprilTag library's detections (``apriltag_detection.p``, pupil-apriltags'
+    ``Detection.corners``: counter-clockwise in the image, from the bottom-left), so detected
+    corners pair with these by index.
     """
     h = size / 2.0
-    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    return np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
 
 
 def invert(T: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import UserError
+from .io_utils import clean_array
 from .geometry import marker_corners_local, transform_points, world_from_marker_pose
 
 FAMILY = "tag36h11"
@@ -163,7 +164,9 @@ def marker_from_json(d: dict, default_size: float = DEFAULT_TAG_SIZE) -> Marker:
         T = world_from_marker_pose(position, normal)
     else:
         raise UserError("marker entry needs 'world_from_marker' or both 'position' and 'normal'")
-    return Marker(tag_id, float(size), T, family)
+    # at the precision JSON files are written with (io_utils.write_json): a marker written back
+    # (config.json's existing markers) and read again is bit for bit the one used
+    return Marker(tag_id, float(size), clean_array(T), family)
 
 
 def load_markers(path: str | Path, option: str | None = None,

@@ -5,6 +5,10 @@ and what a log file of a multi-hour ``evaluate`` (``nohup ... > run.log``, CI) d
 each refresh becomes more text on one endless line. :func:`progress_bar` picks per call: a tqdm
 bar when stderr is a terminal, otherwise a :class:`LogProgress` that writes one ``INFO`` line
 (done / total, rate, time left) at most every ``interval_s`` seconds and one when the loop ends.
+
+Both time the rate from the first finished item on: what comes before it is start-up (worker
+processes, GL contexts, the scene upload), which would otherwise make the first estimate of
+the time left many times too long.
 """
 
 from __future__ import annotations
@@ -54,14 +58,19 @@ class LogProgress:
         self.total, self.desc, self.unit = int(total), desc, unit
         self.n = self._start_n = int(initial)
         self.interval_s, self._clock = float(interval_s), clock
-        self._t0 = self._last = clock()
+        self._t0 = self._last = self._started = clock()
         self._closed = False
+        self._warm = False
         log.debug("%s: starting, %d/%d %s", desc, self.n, self.total, unit)
 
     def update(self, n: int = 1) -> None:
         """Count ``n`` more done items; log a line when ``interval_s`` has passed since the last."""
         self.n += int(n)
         now = self._clock()
+        if not self._warm:  # the rate starts at the first finished item (see the module docstring)
+            self._warm = True
+            self._start_n, self._t0 = self.n, now
+            return
         if now - self._last >= self.interval_s and self.n < self.total:
             self._last = now
             rate = (self.n - self._start_n) / max(now - self._t0, 1e-9)
@@ -76,9 +85,9 @@ class LogProgress:
         if self._closed:
             return
         self._closed = True
-        if self.n > self._start_n:
+        if self._warm:
             log.info("%s: %d/%d %s in %s", self.desc, self.n, self.total, self.unit,
-                     format_duration(self._clock() - self._t0))
+                     format_duration(self._clock() - self._started))
 
     def __enter__(self) -> "LogProgress":
         return self
@@ -114,10 +123,29 @@ def progress_bar(total: int, desc: str, unit: str, enabled: bool = True, initial
         return _NoProgress()
     isatty = getattr(sys.stderr, "isatty", None)
     if isatty is not None and isatty():
-        from tqdm import tqdm
-
-        return tqdm(total=total, initial=initial, desc=desc, unit=unit, leave=False)
+        return _terminal_bar(total, desc, unit, initial)
     return LogProgress(total, desc, unit, initial=initial)
+
+
+def _terminal_bar(total: int, desc: str, unit: str, initial: int):
+    """A tqdm bar whose rate and time left start at the first finished item."""
+    from tqdm import tqdm
+
+    class _Bar(tqdm):
+        _warm = False
+
+        def update(self, n=1):
+            if self._warm:
+                return super().update(n)
+            self._warm = True
+            self.n += n
+            self.initial += n  # done during start-up: not in the rate
+            self.start_t = self.last_print_t = self._time()
+            self.last_print_n = self.n
+            self.refresh()
+            return True
+
+    return _Bar(total=total, initial=initial, desc=desc, unit=unit, leave=False)
 
 
 def track(items: Iterable[T], desc: str, unit: str, enabled: bool = True, total: int | None = None) -> Iterator[T]:

@@ -10,7 +10,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     from ..report.check_report import run_check
 
     _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, workers=args.workers,
-                        progress=not args.quiet)
+                        progress=not args.quiet, adopt=args.adopt)
     print(text)
     return 0
 
@@ -35,6 +35,9 @@ def add_check_parser(sub) -> argparse.ArgumentParser:
                    help=f"an installed tag farther than this from a planned spot is not that spot's tag, metres "
                         f"(default {MATCH_RADIUS_M:g})")
     p.add_argument("--workers", type=int, default=1, help="processes for the depth renders (default 1: this process)")
+    from .options import add_adopt_arg
+
+    add_adopt_arg(p)  # PLAN_DIR from an older markerplace, or an --out folder it did not make
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
     p.set_defaults(func=cmd_check)
     return p

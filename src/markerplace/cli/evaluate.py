@@ -48,7 +48,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..scene.spec import SceneSpec
     from ..plan.planner import validate
     from ..testbed.experiment import run_evaluation
-    from ..output_checks import check_output_dir
+    from ..runtime.run_folder import open_run_folder
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
@@ -60,7 +60,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     placement_files = find_placement_files(args.placements) if args.placements else {}
     for path in placement_files.values():
         load_markers(path, "--placements")
-    check_output_dir(args.out)
+    open_run_folder(args.out, "evaluate", adopt=args.adopt)
     check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))

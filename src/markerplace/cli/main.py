@@ -93,7 +93,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..plan.placement import check_k
     from ..plan.planner import first_pick_gain, place, prepare, validate
     from ..report.plan_outputs import write_plan_outputs
-    from ..output_checks import check_output_dir
+    from ..runtime.run_folder import open_run_folder
     from ..scene.worldframe import markers_to_internal, world_offset
 
     config = plan_config_from_args(args)
@@ -105,7 +105,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing, "--existing") if args.existing else []
     check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
-    check_output_dir(args.out)
+    from ..plan.exclusion import apply_exclusion, load_exclusion, previous_markers
+
+    exclusion = load_exclusion(args.exclude) if args.exclude else None
+    previous = previous_markers(args.out, args.scene)  # to say what this run changes
+    open_run_folder(args.out, "plan", adopt=args.adopt)  # marked, locked; released by main()
     check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
@@ -122,12 +126,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
                        k=config.placement.k)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
+    if exclusion is not None:
+        data = apply_exclusion(data, exclusion, offset, config.placement.k)
     placement = place(data, config.placement, existing=existing, progress=progress)
     summary = write_plan_outputs(args.out, data=data, placement=placement,
                                  first_gain=first_pick_gain(data, placement), config=config,
-                                 method=config.placement.method, scene_source=args.scene, existing=existing,
+                                 method=config.placement.method, scene_source=args.scene, scene=scene, existing=existing,
                                  world_offset=offset, paper=args.paper,
-                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed})
+                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed},
+                                 exclusion=exclusion)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
@@ -137,6 +144,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     print(f"wrote {report}")
+    if previous is not None:
+        from ..plan.exclusion import describe_changes, placement_changes
+
+        for line in describe_changes(placement_changes(previous, previous_markers(args.out, args.scene) or [])):
+            print(line)
     return 0
 
 
@@ -190,6 +202,10 @@ def build_parser() -> argparse.ArgumentParser:
     p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
                         help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
+    p_plan.add_argument("--exclude", default=None, metavar="FILE",
+                        help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
+                             "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
+                             "placing, so a re-run reuses every cached stage (see docs/cli.md)")
     from ..report.pdf import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
@@ -218,6 +234,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+SIGNED_VALUE_OPTIONS = ("--up", "--start", "--pose")
+"""Options whose value may start with '-' (``--up -x``, ``--start -2.5,1``): argparse would read it
+as an option ("expected one argument"), so :func:`join_signed_values` glues it on with '='."""
+
+
+def join_signed_values(argv: list[str]) -> list[str]:
+    """``[..., "--up", "-x", ...]`` -> ``[..., "--up=-x", ...]`` for :data:`SIGNED_VALUE_OPTIONS`
+    followed by a value that starts with '-' (and is not ``--``-anything); the rest unchanged."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in SIGNED_VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and not argv[i + 1].startswith("--") and len(argv[i + 1]) > 1:
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
 RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
 """Commands that cache their stages in their output folder: an interrupted one resumes."""
 
@@ -228,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     with InterruptGuard() as guard:
         try:
             parser = build_parser()
-            args = parser.parse_args(argv)
+            args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
             setup_logging(quiet=args.quiet, verbose=args.verbose)
             guard.resumable = args.command in RESUMABLE_COMMANDS
             func = getattr(args, "func", None)
@@ -241,7 +278,12 @@ def main(argv: list[str] | None = None) -> int:
             from ..validation import check_args
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
-            return int(func(args) or 0)
+            try:
+                return int(func(args) or 0)
+            finally:
+                from ..runtime.run_folder import close_all
+
+                close_all()  # unlock the run folders; one the run wrote nothing into is left as found
         except UserError as err:
             print(f"markerplace: error: {err}", file=sys.stderr)
             return err.exit_code

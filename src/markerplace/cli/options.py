@@ -16,8 +16,8 @@ from typing import Sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "parse_level", "parse_xy", "plan_config_from_args",
-           "plan_config_for_budgets", "plan_inputs_in_scene_frame", "check_cluster_answers"]
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy",
+           "plan_config_from_args", "plan_config_for_budgets", "plan_inputs_in_scene_frame", "check_cluster_answers"]
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -82,6 +82,24 @@ def parse_level(text: str):
     return level
 
 
+def parse_allow(text: str | None) -> tuple[str, ...]:
+    """``--allow``: comma list of :data:`~markerplace.plan.wall_candidates.ALLOWABLE` keys
+    (``doors,furniture``); ``none`` or empty: nothing. Raises UserError for an unknown one."""
+    from ..errors import UserError
+    from ..plan.wall_candidates import ALLOWABLE
+
+    if text is None:
+        return ()
+    items = [t.strip().lower() for t in str(text).split(",") if t.strip()]
+    if items == ["none"]:
+        return ()
+    unknown = [t for t in items if t not in ALLOWABLE]
+    if unknown:
+        raise UserError(f"--allow {text!r}: unknown {', '.join(map(repr, unknown))}; choose from "
+                        f"{', '.join(ALLOWABLE)} (comma-separated)")
+    return tuple(dict.fromkeys(items))
+
+
 def plan_config_from_args(args: argparse.Namespace):
     """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
     from dataclasses import replace
@@ -93,7 +111,8 @@ def plan_config_from_args(args: argparse.Namespace):
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
                    marker_spacing=args.marker_spacing,
-                   max_open_fraction=1.0 if args.keep_outdoors else DiscretizeConfig().max_open_fraction)
+                   max_open_fraction=1.0 if args.keep_outdoors else DiscretizeConfig().max_open_fraction,
+                   allow=parse_allow(getattr(args, "allow", None)))
     # tag_size: derived from placement's by PlanConfig
     placement = PlacementConfig(k=getattr(args, "k", 20), method=getattr(args, "method", "omp"), v=args.v,
                                 marker_model=args.marker_model, tag_size=args.tag_size,
@@ -133,6 +152,12 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
                    help="also plan free regions open to the outside (a porch, a strip under the eaves, a balcony; "
                         "or a room whose glass walls the scan lost): by default a region from which more than 35 %% "
                         "of eye-level views hit nothing is left out, and logged")
+    from ..plan.wall_candidates import ALLOWABLE
+
+    g.add_argument("--allow", default=None, metavar="CATEGORIES",
+                   help="let tags go on these too, comma-separated: " + ", ".join(ALLOWABLE) + " (default: none, "
+                        "tags only on walls and columns; named from the model's part names, IFC classes, "
+                        "transparency and geometry; see docs/cli.md)")
     g.add_argument("--yaws", type=int, default=8, help="camera yaws per location (default 8)")
     g.add_argument("--marker-spacing", type=float, default=1.0, help="minimum spacing of candidate marker poses on a wall, metres (default 1.0)")
     g = p.add_argument_group("scoring and placement")
@@ -154,4 +179,13 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--force", action="store_true",
                    help="run even when the size guard estimates more poses, memory or time than the limits "
                         "(200,000 poses, 80%% of this machine's memory, 12 h)")
+    add_adopt_arg(p)
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
+
+
+def add_adopt_arg(p: argparse.ArgumentParser) -> None:
+    """``--adopt``: write a run into a non-empty folder markerplace did not make
+    (:mod:`markerplace.runtime.run_folder`)."""
+    p.add_argument("--adopt", action="store_true",
+                   help="use a non-empty --out folder that markerplace did not make: its run files are added, the "
+                        "files already there are never replaced or deleted (default: such a folder is refused)")

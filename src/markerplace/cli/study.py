@@ -13,7 +13,7 @@ __all__ = ["add_study_parser"]
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``markerplace study``: prints the study's tables."""
-    from ..output_checks import check_output_dir
+    from ..runtime.run_folder import open_run_folder
     from ..plan.planner import validate
     from ..scene.spec import SceneSpec
     from ..testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
@@ -30,7 +30,7 @@ def cmd_study(args: argparse.Namespace) -> int:
                      detection_off=not args.no_detection_study, similarity_off=not args.no_similarity_study)
     plan_config = plan_config_for_budgets(args, ks)
     validate(plan_config)
-    check_output_dir(args.out)
+    open_run_folder(args.out, "study", adopt=args.adopt)
     check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     runs = 1 + len(plan.shifts) + len(plan.scales) + int(plan.detection_off)

@@ -3,7 +3,7 @@
 Image i owns rows ``offsets[i]:offsets[i+1]`` of ``keypoints`` (K, 2) float32 pixels,
 ``descriptors`` (K, 128) uint8 (OpenCV SIFT values rounded) and ``points_world`` (K, 3) float32
 world metres (NaN where the depth gave no point), and tags ``tag_offsets[i]:tag_offsets[i+1]`` of
-``tag_ids`` (T,) int32 and ``tag_corners`` (T, 4, 2) float32 pixels (TL, TR, BR, BL). Optional
+``tag_ids`` (T,) int32 and ``tag_corners`` (T, 4, 2) float32 pixels (the detector's order: BL, BR, TR, TL). Optional
 per-image ``extras`` (e.g. ``candidate_unoccluded`` (N, C) bool) live next to them.
 
 Folders can be memory-mapped (workers read the map database without copying it), and
@@ -14,14 +14,15 @@ bounded by one part, and an interrupted stage resumes from the parts already wri
 from __future__ import annotations
 
 import logging
-import shutil
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ..io_utils import atomic_path, write_npy
+from ..io_utils import allocate, atomic_path, write_npy
+from ..runtime import run_folder
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +108,6 @@ class FeatureSet:
     def save(self, folder: str | Path) -> None:
         """Write one ``.npy`` per array into ``folder`` (each atomically)."""
         folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
         for name in self.FIELDS:
             write_npy(folder / f"{name}.npy", np.ascontiguousarray(getattr(self, name)))
         for name, arr in self.extras.items():
@@ -144,13 +144,15 @@ class FeatureWriter:
         self.key = str(key)
         self.part_size = int(part_size)
         self._buffer: dict[int, ImageFeatures] = {}
-        self.parts.mkdir(parents=True, exist_ok=True)
+        self._dropped: set[Path] = set()
+        run_folder.make_dirs(self.parts)
 
     def _part_files(self) -> list[Path]:
-        return sorted(self.parts.glob("part_*.npz"))
+        return sorted(p for p in self.parts.glob("part_*.npz") if p not in self._dropped)
 
     def done(self) -> set[int]:
-        """Images already written by earlier runs with the same key (damaged parts are dropped)."""
+        """Images already written by earlier runs with the same key (damaged parts are dropped:
+        deleted when markerplace wrote them, else left alone and ignored)."""
         out: set[int] = set()
         for p in self._part_files():
             try:
@@ -160,7 +162,8 @@ class FeatureWriter:
                     out.update(int(i) for i in z["images"])
             except Exception as err:  # noqa: BLE001 - any damage: recompute those images
                 log.warning("features: dropping %s (%s)", p, err)
-                p.unlink(missing_ok=True)
+                self._dropped.add(p)
+                run_folder.remove(p)
         return out
 
     def add(self, index: int, features: ImageFeatures) -> None:
@@ -201,13 +204,24 @@ class FeatureWriter:
             raise RuntimeError(f"features: {int((~seen).sum())} of {self.num_images} images missing in {self.parts}")
         offsets = np.concatenate([[0], np.cumsum(counts)])
         tag_offsets = np.concatenate([[0], np.cumsum(tcounts)])
-        out = {}
-        for name, shape, dtype in _ROWS:
-            out[name] = _memmap(self.folder / f"{name}.npy", (int(offsets[-1]),) + shape, dtype)
-        for name, shape, dtype in _TAGS:
-            out[name] = _memmap(self.folder / f"{name}.npy", (int(tag_offsets[-1]),) + shape, dtype)
-        for name, (shape, dtype) in extra_shapes.items():
-            out[name] = _memmap(self.folder / f"{name}.npy", (self.num_images,) + shape, dtype)
+        shapes = {name: ((int(offsets[-1]),) + shape, dtype) for name, shape, dtype in _ROWS}
+        shapes.update({name: ((int(tag_offsets[-1]),) + shape, dtype) for name, shape, dtype in _TAGS})
+        shapes.update({name: ((self.num_images,) + shape, dtype) for name, (shape, dtype) in extra_shapes.items()})
+        with ExitStack() as stack:  # each array filled in a temporary file, renamed when all are complete
+            out = {name: _memmap(stack.enter_context(atomic_path(self.folder / f"{name}.npy")), shape, dtype)
+                   for name, (shape, dtype) in shapes.items()}
+            self._fill(out, files, offsets, tag_offsets, extra_shapes)
+            for arr in out.values():
+                arr.flush()
+            del out
+        write_npy(self.folder / "offsets.npy", offsets)
+        write_npy(self.folder / "tag_offsets.npy", tag_offsets)
+        run_folder.remove_tree(self.parts)
+        return FeatureSet.load(self.folder)
+
+    @staticmethod
+    def _fill(out: dict, files: list, offsets: np.ndarray, tag_offsets: np.ndarray, extra_shapes: dict) -> None:
+        """Copy every part's rows into the (memory-mapped) arrays ``out``."""
         for p in files:
             with np.load(p, allow_pickle=False) as z:
                 img = z["images"]
@@ -219,15 +233,11 @@ class FeatureWriter:
                         out[name][tag_offsets[i]:tag_offsets[i + 1]] = z[name][pt[j]:pt[j + 1]]
                 for name in extra_shapes:
                     out[name][img] = z[name]
-        for arr in out.values():
-            arr.flush()
-        del out
-        write_npy(self.folder / "offsets.npy", offsets)
-        write_npy(self.folder / "tag_offsets.npy", tag_offsets)
-        shutil.rmtree(self.parts, ignore_errors=True)
-        return FeatureSet.load(self.folder)
 
 
 def _memmap(path: Path, shape: tuple, dtype) -> np.memmap:
-    path.unlink(missing_ok=True)
-    return np.lib.format.open_memmap(path, mode="w+", dtype=dtype, shape=shape)
+    """A new ``.npy`` file at ``path`` mapped for writing, its blocks reserved (a full disk
+    fails here, not with SIGBUS while it is filled)."""
+    arr = np.lib.format.open_memmap(path, mode="w+", dtype=dtype, shape=shape)
+    allocate(path)
+    return arr

@@ -1,12 +1,11 @@
 """AprilTag (tag36h11) detection with pupil-apriltags, and the camera pose a tag implies.
 
-Corner convention. pupil-apriltags returns corners counter-clockwise in the image starting at
-the tag's top-right corner (TR, TL, BL, BR as seen by a facing viewer) in a pixel convention
-where pixel centres sit at +0.5. Verified empirically on tags from
-``cv2.aruco.generateImageMarker(DICT_APRILTAG_36h11, ...)`` (also rotated/warped; see
-tests/test_localization_pnp.py). :func:`detect_tags` reorders to TL, TR, BR, BL (the order of
-:func:`markerplace.geometry.marker_corners_local`) and shifts by -0.5 px to OpenCV's convention
-(pixel centres at integers).
+Corner convention: the detector's own. pupil-apriltags (the AprilTag C library) returns the
+corners counter-clockwise in the image from the tag's bottom-left (BL, BR, TR, TL as a facing
+viewer sees the tag as printed; ``apriltag_detection.p`` in ``apriltag.h``, the object points of
+``apriltag_pose.c``), which is the order of :func:`markerplace.geometry.marker_corners_local`:
+corners pair by index, no permutation. Its pixel convention puts pixel centres at +0.5;
+:func:`detect_tags` shifts by -0.5 px to OpenCV's (pixel centres at integers).
 
 Detector settings: ``quad_decimate=1.0`` (full resolution). At 600x450 a 0.4 m tag 8-10 m away
 spans only ~12-15 px; decimation by 2 loses those far tags, and full resolution costs only a few
@@ -22,18 +21,20 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..geometry import invert, marker_corners_local
+from ..geometry import invert
 from ..markers import FAMILY, Marker
 from .features import to_gray
 
 log = logging.getLogger(__name__)
 
 QUAD_DECIMATE = 1.0
-_PUPIL_TO_TLTRBRBL = [1, 0, 3, 2]
 _PUPIL_PIXEL_OFFSET = 0.5
 
 _DETECTORS: dict[int, object] = {}
-_MARKER_FROM_FLIPPED = np.diag([1.0, -1.0, -1.0, 1.0])
+MARKER_FROM_APRILTAG = np.diag([1.0, -1.0, -1.0, 1.0])
+"""(4, 4) pose of the AprilTag library's tag frame (x right, y down, z into the tag, as a facing
+viewer sees it; the frame of its pose estimates) in markerplace's marker frame (x right, y up,
+z out of the wall): a half-turn about x."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +43,8 @@ class TagDetection:
 
     Attributes:
         tag_id: tag36h11 id.
-        corners: (4, 2) float64 pixel ``(x, y)``, order TL, TR, BR, BL as seen by a facing viewer.
+        corners: (4, 2) float64 pixel ``(x, y)`` (pixel centres at integers), the detector's order:
+            BL, BR, TR, TL as a facing viewer sees the tag (:func:`~markerplace.geometry.marker_corners_local`).
         center: (2,) pixel ``(x, y)`` of the tag centre.
         decision_margin: detector's decoding margin (higher is more reliable).
         hamming: number of corrected bits.
@@ -107,7 +109,7 @@ def detect_tags(image: np.ndarray, max_hamming: int = 1) -> list[TagDetection]:
             continue
         det = TagDetection(
             tag_id=int(r.tag_id),
-            corners=np.asarray(r.corners, dtype=np.float64)[_PUPIL_TO_TLTRBRBL] - _PUPIL_PIXEL_OFFSET,
+            corners=np.asarray(r.corners, dtype=np.float64) - _PUPIL_PIXEL_OFFSET,
             center=np.asarray(r.center, dtype=np.float64) - _PUPIL_PIXEL_OFFSET,
             decision_margin=float(r.decision_margin),
             hamming=int(r.hamming),
@@ -122,21 +124,20 @@ def pose_from_tag(detection: TagDetection, marker: Marker, K: np.ndarray) -> np.
     """(4, 4) ``world_from_cam`` implied by one tag detection (IPPE square on its 4 corners).
 
     Args:
-        detection: corners in TL, TR, BR, BL order (pixels).
+        detection: corners in the detector's order (BL, BR, TR, TL), pixels.
         marker: the tag's known pose and size.
         K: (3, 3) camera matrix.
     """
-    # OpenCV's IPPE returns garbage rotations when the answer is near a half-turn (rvec norm
-    # ~ pi), which is exactly the case for a camera facing a marker (marker y up, camera y
-    # down). Solve in a flipped frame F = marker rotated by pi about x (F's y down, z into the
-    # wall), where facing views are near the identity. IPPE_SQUARE wants the corners at
-    # (-h, h), (h, h), (h, -h), (-h, -h) in F, i.e. the marker's BL, BR, TR, TL.
-    obj = marker_corners_local(marker.size).astype(np.float64).reshape(4, 1, 3)
-    img = np.asarray(detection.corners, dtype=np.float64)[[3, 2, 1, 0]].reshape(4, 1, 2)
+    # IPPE_SQUARE's object points are (-h, h), (h, h), (h, -h), (-h, -h): the AprilTag library's
+    # tag frame (y down, z into the tag) in the detector's corner order, so it solves for
+    # cam_from_apriltag directly (near the identity for facing views, where IPPE is stable).
+    h = marker.size / 2.0
+    obj = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]]).reshape(4, 1, 3)
+    img = np.asarray(detection.corners, dtype=np.float64).reshape(4, 1, 2)
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.asarray(K, float), None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
     if not ok or not np.all(np.isfinite(rvec)) or not np.all(np.isfinite(tvec)):
         raise RuntimeError("solvePnP(IPPE_SQUARE) failed on a tag detection")
-    cam_from_flipped = np.eye(4)
-    cam_from_flipped[:3, :3] = cv2.Rodrigues(rvec)[0]
-    cam_from_flipped[:3, 3] = tvec.reshape(3)
-    return np.asarray(marker.world_from_marker, float) @ _MARKER_FROM_FLIPPED @ invert(cam_from_flipped)
+    cam_from_apriltag = np.eye(4)
+    cam_from_apriltag[:3, :3] = cv2.Rodrigues(rvec)[0]
+    cam_from_apriltag[:3, 3] = tvec.reshape(3)
+    return np.asarray(marker.world_from_marker, float) @ MARKER_FROM_APRILTAG @ invert(cam_from_apriltag)

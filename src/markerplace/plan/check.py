@@ -18,6 +18,10 @@ Pairing planned spots with installed tags (all in the internal frame, metres):
    ``wrong id`` (``swapped`` when the two ids sit on each other's spots);
 3. spots left are ``missing``; installed tags left are ``extra``.
 
+What to do is said in the installer's terms (:func:`directions`): as you face the planned spot's
+wall, how far to move the tag left or right, up or down, into or out from the wall, and how to
+turn it.
+
 Scores are the localizability -H (nats) per pose: with the existing and planned markers vs the
 existing and installed ones. Per planned spot, ``score_lost`` is the drop of the mean score over
 all poses when only that spot's tag is replaced by what was installed there (removed when
@@ -38,11 +42,15 @@ from .placement import MarkerCoverage, apply_coverages
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CheckResult", "TagRow", "compare", "installed_coverages", "pair_markers"]
+__all__ = ["CheckResult", "TagRow", "compare", "installed_coverages", "pair_markers", "directions", "correction"]
 
 MATCH_RADIUS_M = 1.5
 TOLERANCE_M = 0.05
 TOLERANCE_DEG = 5.0
+SAY_M = 0.005
+"""Moves shorter than this (metres) are left out of the words (they print as 0.00 m)."""
+SAY_DEG = 0.5
+"""Turns smaller than this (degrees) are left out of the words."""
 
 
 @dataclass
@@ -59,6 +67,8 @@ class TagRow:
         score_lost_seen: the same over the poses that see the planned tag.
         planned, installed: (4, 4) ``world_from_marker`` (internal frame) or None.
         note: what to do, in words.
+        move: how to bring the installed tag onto its spot, as you face the spot's wall
+            (:func:`correction`), or None when missing or extra.
     """
 
     order: int
@@ -72,6 +82,7 @@ class TagRow:
     planned: np.ndarray | None = None
     installed: np.ndarray | None = None
     note: str = ""
+    move: dict | None = None
 
 
 @dataclass
@@ -96,6 +107,54 @@ class CheckResult:
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     c = float(np.clip(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
     return float(np.degrees(np.arccos(c)))
+
+
+def correction(planned: np.ndarray, installed: np.ndarray) -> dict:
+    """How to bring a tag hung at ``installed`` onto ``planned`` (both (4, 4) ``world_from_marker``),
+    in the planned tag's frame, i.e. as a person facing its wall sees it (the marker frame: x to
+    the right, y up, z out of the wall towards the person).
+
+    Returns:
+        ``right_m``, ``up_m``, ``out_m``: the move of the tag centre, metres (negative = left, down,
+        into the wall); ``turn_cw_deg``: how far to turn it clockwise on the wall as you face it
+        (negative = counter-clockwise; 180 = upside down); ``faces_right_deg`` / ``faces_up_deg``:
+        how far the installed tag faces to the person's right / up from the planned direction
+        (a tag not flat on the planned wall).
+    """
+    R = np.asarray(planned, float)[:3, :3]
+    d = R.T @ (np.asarray(planned, float)[:3, 3] - np.asarray(installed, float)[:3, 3])
+    rel = R.T @ np.asarray(installed, float)[:3, :3]  # installed axes in the planned frame
+    n = rel[:, 2]
+    roll = float(np.degrees(np.arctan2(rel[1, 0], rel[0, 0])))  # its x axis, counter-clockwise as seen facing the wall
+    return {"right_m": float(d[0]), "up_m": float(d[1]), "out_m": float(d[2]), "turn_cw_deg": roll,
+            "faces_right_deg": float(np.degrees(np.arctan2(n[0], n[2]))),
+            "faces_up_deg": float(np.degrees(np.arcsin(np.clip(n[1], -1.0, 1.0))))}
+
+
+def directions(move: dict) -> str:
+    """What to do, in words, from a :func:`correction`: e.g. ``"move it 0.12 m left and 0.05 m up
+    (as you face the wall)"``; parts under :data:`SAY_M` / :data:`SAY_DEG` are left out; ``""``
+    when nothing is left."""
+    parts = []
+    for key, pos, neg in (("right_m", "right", "left"), ("up_m", "up", "down"),
+                          ("out_m", "out from the wall", "into the wall")):
+        v = move[key]
+        if abs(v) >= SAY_M:
+            parts.append(f"{abs(v):.2f} m {pos if v > 0 else neg}")
+    text = f"move it {' and '.join(parts)}" if parts else ""
+    turn = (move["turn_cw_deg"] + 180.0) % 360.0 - 180.0
+    if abs(abs(turn) - 180.0) < SAY_DEG:
+        words = "turn it 180 deg: it hangs upside down (the caption edge goes at the bottom)"
+    elif abs(turn) >= SAY_DEG:
+        words = f"turn it {abs(turn):.0f} deg {'clockwise' if turn > 0 else 'counter-clockwise'}"
+    else:
+        words = ""
+    faces = [f"{abs(v):.0f} deg to your {a if v > 0 else b}" for v, a, b in
+             ((move["faces_right_deg"], "right", "left"), (move["faces_up_deg"], "up", "down")) if abs(v) >= SAY_DEG]
+    text = ", ".join(t for t in (text, words) if t)
+    if faces:
+        text += ("; " if text else "") + f"it faces {' and '.join(faces)}: hang it flat on the wall"
+    return f"{text} (as you face the wall)" if text else ""
 
 
 def pair_markers(planned: Sequence, installed: Sequence, radius: float = MATCH_RADIUS_M) -> dict[int, int]:
@@ -203,14 +262,15 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
         s = _scores_with(info_planned, score_planned, [planned_covs[i]], add)
         seen = planned_covs[i].pose_idx
         lost_seen = float((score_planned[seen] - s[seen]).mean()) if len(seen) else 0.0
+        move = None
         if j is None:
             status, shift, angle, iid = "missing", None, None, None
-            note = f"tag {m.tag_id} not found within {radius:g} m of its spot: hang it"
+            note = f"tag {m.tag_id} not found within {radius:g} m of its spot #{i + 1}: hang it there"
         else:
             status, shift, angle = _status(m, installed[j], tol_m, tol_deg)
             iid = int(installed[j].tag_id)
-            note = {"as planned": "ok", "shifted": f"move it {shift:.2f} m back to its spot" + (
-                f" and turn it {angle:.0f} deg" if angle > tol_deg else "")}.get(status, "")
+            move = correction(m.world_from_marker, installed[j].world_from_marker)
+            note = {"as planned": "ok", "shifted": directions(move) or "move it onto its spot"}.get(status, "")
             if status == "wrong id":
                 if spot_of_id.get(iid) == int(m.tag_id):
                     status = "swapped"
@@ -219,7 +279,7 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
                     note = f"tag {iid} hangs here instead of {m.tag_id}: replace it or use the installed tag maps"
         rows.append(TagRow(i + 1, int(m.tag_id), iid, status, shift, angle, mean_planned - float(s.mean()), lost_seen,
                            np.asarray(m.world_from_marker, float), None if j is None else
-                           np.asarray(installed[j].world_from_marker, float), note))
+                           np.asarray(installed[j].world_from_marker, float), note, move))
     paired = set(pairs.values())
     for j, inst in enumerate(installed):
         if j in paired:

@@ -42,6 +42,10 @@ class Discretization:
         candidate_normal: (C, 3) unit horizontal wall normals (towards the free space).
         candidate_position: (C, 3) tag centres, world metres.
         candidate_storey: (C,) storey index of each candidate.
+        candidate_surface: (C,) str: what each candidate is on (``"wall"``, ``"column"``, or for
+            a category ``plan --allow`` allowed e.g. ``"bookshelf front"``, ``"door"``; see
+            :mod:`markerplace.plan.wall_candidates`); ``""`` when not known.
+        candidate_part: (C,) str: the name of the mesh part under each candidate's centre.
         perimeter_arclength: (C,) position of each candidate along the free-space perimeter,
             metres in [0, perimeter_length] (the storeys' perimeter loops concatenated).
         perimeter_length: total length of the free-space perimeter loops, metres.
@@ -73,6 +77,16 @@ class Discretization:
     storeys: np.ndarray
     start: np.ndarray = field(default_factory=lambda: np.zeros(2))
     summary: dict = field(default_factory=dict)
+    candidate_surface: np.ndarray | None = None
+    candidate_part: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """Unknown surfaces (an artifact from before they were recorded) become ``""``."""
+        C = len(self.candidate_position)
+        for name in ("candidate_surface", "candidate_part"):
+            value = getattr(self, name)
+            value = np.full(C, "", "<U1") if value is None or len(value) != C else np.asarray(value, dtype=str)
+            object.__setattr__(self, name, value)
 
     @property
     def origin(self) -> np.ndarray:
@@ -110,19 +124,22 @@ class Discretization:
         keep = np.asarray(keep, dtype=bool)
         return replace(self, candidate_world_from_marker=self.candidate_world_from_marker[keep],
                        candidate_normal=self.candidate_normal[keep], candidate_position=self.candidate_position[keep],
-                       candidate_storey=self.candidate_storey[keep], perimeter_arclength=self.perimeter_arclength[keep])
+                       candidate_storey=self.candidate_storey[keep], perimeter_arclength=self.perimeter_arclength[keep],
+                       candidate_surface=self.candidate_surface[keep], candidate_part=self.candidate_part[keep])
 
 
 _ARRAY_FIELDS = ("locations", "location_z", "location_storey", "world_from_cam", "location_index", "yaw",
                  "candidate_world_from_marker", "candidate_normal", "candidate_position", "candidate_storey",
                  "perimeter_arclength", "occupancy", "planned_storeys", "grid_origin", "storeys", "start")
 _SCALAR_FIELDS = ("perimeter_length", "grid_resolution")
+_TEXT_FIELDS = ("candidate_surface", "candidate_part")  # fixed-width unicode arrays (no pickle)
 
 
 def save(d: Discretization, path: str | Path) -> None:
     """Write ``d`` to a compressed ``.npz`` (atomic, no pickled objects)."""
     arrays = {k: np.asarray(getattr(d, k)) for k in _ARRAY_FIELDS}
     arrays.update({k: np.asarray(float(getattr(d, k))) for k in _SCALAR_FIELDS})
+    arrays.update({k: np.asarray(getattr(d, k), dtype=str) for k in _TEXT_FIELDS})
     arrays["summary_json"] = np.asarray(json.dumps(d.summary, default=_json_default))
     write_npz(path, **arrays)
 
@@ -132,6 +149,7 @@ def load(path: str | Path) -> Discretization:
     with np.load(path, allow_pickle=False) as z:
         kw = {k: z[k] for k in _ARRAY_FIELDS}
         kw.update({k: float(z[k]) for k in _SCALAR_FIELDS})
+        kw.update({k: z[k] for k in _TEXT_FIELDS if k in z.files})
         kw["summary"] = json.loads(str(z["summary_json"]))
     return Discretization(**kw)
 

@@ -13,7 +13,9 @@ and clutter, so the stage is built from three parts:
    anything, ``height`` above their local floor), each with ``num_yaws`` level poses.
 3. :mod:`markerplace.plan.wall_candidates`: range scans at eye level from the camera locations give
    the wall spots; they are spaced uniformly along the free-space perimeter and kept where a
-   flat tag fits (not on glass).
+   flat tag fits on structure that stays (not on glass, windows, doors, curtains, mirrors,
+   screens, pictures or furniture, unless ``allow`` names them; by the parts' names and by
+   geometry), each recording what it is on.
 
 ``level`` plans one storey (0 = lowest) or, when None, every storey at once (one budget, one
 greedy over the poses and candidates of all storeys).
@@ -41,11 +43,11 @@ from .floorplan import eye_level_support, storey_floor
 from .freespace import Sections, StoreySpace, camera_locations, free_space, obstacle_mask, open_fractions
 from .grid import Grid
 from .storeys import FloorConfig, cast_columns, find_storeys
-from .wall_candidates import CandidateConfig, wall_candidates
+from .wall_candidates import RULES, CandidateConfig, SurfaceLabels, rule_words, wall_candidates
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DiscretizeConfig", "discretize"]
+__all__ = ["DiscretizeConfig", "candidate_arithmetic", "discretize"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,9 @@ class DiscretizeConfig:
             with glassless windows lets far fewer out. 1.0 keeps every region.
         open_reach: length of those rays, metres.
         floor: how storeys and floors are found (:class:`~markerplace.plan.storeys.FloorConfig`).
+        allow: keys of :data:`~markerplace.plan.wall_candidates.ALLOWABLE` (``doors``,
+            ``furniture``, ``off-wall``, ...) whose surfaces may carry tags (``plan --allow``);
+            default none: walls and columns only.
     """
 
     height: float = 1.5
@@ -105,13 +110,14 @@ class DiscretizeConfig:
     max_open_fraction: float = 0.35
     open_reach: float = 50.0
     floor: FloorConfig = field(default_factory=FloorConfig)
+    allow: tuple[str, ...] = ()
 
     def candidate_config(self) -> CandidateConfig:
         return CandidateConfig(height=self.height, marker_spacing=self.marker_spacing,
                                normal_diff_deg=self.normal_diff_deg, tag_size=self.tag_size,
                                tag_border=self.tag_border, flatness_tol=self.flatness_tol,
                                max_normal_z=self.max_normal_z, scan_rays=self.scan_rays,
-                               max_scan_range=self.max_scan_range)
+                               max_scan_range=self.max_scan_range, allow=tuple(self.allow))
 
 
 def _grid_for(vertices: np.ndarray, cfg: DiscretizeConfig) -> Grid:
@@ -206,12 +212,13 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
         raise UserError(f"no feasible camera poses: no free cell with clearance >= {cfg.clearance:g} m and floor "
                         f"below at z={eyes} m; check --start/--height/--clearance/--grid-spacing")
 
-    cand = wall_candidates(rc, scene.face_transparent(), grid,
+    cand = wall_candidates(rc, SurfaceLabels.from_scene(scene), grid,
                            [(floor, space.free, np.column_stack([xy, z])) for _, floor, _, space, xy, z in spaces],
                            cfg.candidate_config())
     if len(cand.position) == 0:
         raise UserError(f"no candidate marker poses: no flat near-vertical wall at eye level holds a "
-                        f"{cfg.tag_size:g} m tag; check --height/--tag-size")
+                        f"{cfg.tag_size:g} m tag ({_removed_words(cand.removed, cfg.tag_size)}); check "
+                        "--height/--tag-size, or --allow what the spots are on")
 
     locations = np.concatenate([t[4] for t in spaces])
     location_z = np.concatenate([t[5] for t in spaces])
@@ -228,11 +235,14 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
     for (s, floor, open_floor, space, xy, z) in spaces:
         info = _storey_report(s, storeys[s], grid, open_floor, space, xy, int((cand_storey == s).sum()), cfg)
         summary["per_storey"].append(info)
-    summary["candidates_removed"] = {"glass": cand.removed["glass"], "does not fit": cand.removed["does not fit"]}
-    summary["wall_spots"] = cand.removed["spots"]
-    log.info("discretize: %d wall spots along the free space: %d on glass, %d where a %.2f m tag does not fit "
-             "flat (corner, opening, small surface) -> %d candidates", cand.removed["spots"], cand.removed["glass"],
-             cand.removed["does not fit"], cfg.tag_size, len(cT))
+    r = cand.removed
+    summary["candidates_removed"] = {rule: r[rule] for rule in RULES}
+    summary["wall_spots"] = r["spots"]
+    summary["wall_spots_pass"] = r["pass"]
+    summary["candidates_crowded"] = r["crowded"]
+    summary["candidates_added"] = r["added"]
+    summary["allow"] = list(cfg.allow)
+    log.info("discretize: %s", candidate_arithmetic(summary, cfg.marker_spacing, cfg.tag_size, len(cT)))
 
     if start is None:
         first = spaces[0]
@@ -245,10 +255,32 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
         locations=locations, location_z=location_z, location_storey=location_storey, world_from_cam=world_from_cam,
         location_index=location_index.astype(np.int64), yaw=yaw, candidate_world_from_marker=cT,
         candidate_normal=cand.normal, candidate_position=cand.position, candidate_storey=cand_storey,
+        candidate_surface=cand.surface, candidate_part=cand.part,
         perimeter_arclength=cand.arclength, perimeter_length=float(cand.perimeter_length),
         occupancy=np.stack([t[3].occupancy for t in spaces]), planned_storeys=np.asarray(slots, np.int64),
         grid_origin=np.array([grid.x0, grid.y0]), grid_resolution=float(grid.res),
         storeys=np.asarray(storeys, dtype=float), start=np.asarray(start, dtype=float), summary=summary)
+
+
+def _removed_words(removed: dict, tag_size: float) -> str:
+    """``"4 on glass + 3 on doors + ..."`` for the rules that removed spots (``"none removed"``)."""
+    parts = [f"{removed[rule]} {rule_words(rule, tag_size)}" for rule in RULES if removed.get(rule)]
+    return " + ".join(parts) or "none removed"
+
+
+def candidate_arithmetic(summary: dict, spacing: float, tag_size: float, candidates: int) -> str:
+    """One line whose numbers add up: the wall spots ``spacing`` metres apart, those each rule
+    removed and those that pass; then the candidates as those that pass, less the ones crowded
+    out, plus the spots found beside removed ones (from a discretization's ``summary``)."""
+    removed = summary.get("candidates_removed", {})
+    spots, passed = summary.get("wall_spots", 0), summary.get("wall_spots_pass", 0)
+    crowded, added = summary.get("candidates_crowded", 0), summary.get("candidates_added", 0)
+    rules = [f"{removed[rule]} {rule_words(rule, tag_size)}" for rule in RULES if removed.get(rule)]
+    line = f"{spots} wall spots {spacing:g} m apart = " + " + ".join(rules + [f"{passed} that pass"])
+    line += f"; candidates = those {passed}"
+    if crowded:
+        line += f" - {crowded} crowded out"
+    return line + f" + {added} found beside removed spots by moving along the wall = {candidates}"
 
 
 def _drop_outdoors(rc: RayCaster, grid: Grid, space: StoreySpace, s: int, eye: float,

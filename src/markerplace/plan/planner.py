@@ -2,7 +2,9 @@
 
 Each stage's artifact lives in the run directory with a hash of the inputs it came from
 (:mod:`markerplace.runtime.cache`), so re-running ``plan`` with a different k, method or v reuses the
-expensive stages (rendering, SIFT, similarity) and only re-runs placement.
+expensive stages (rendering, SIFT, similarity) and only re-runs placement. A stage's key holds
+the digest of the artifact it was computed from (observe: ``discretization.npz``; similarity:
+``observations/``), so a recomputed or repaired upstream artifact invalidates what follows.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ from ..imaging.config import ImagingConfig
 from ..imaging.features import FeatureSet
 from ..io_utils import write_npz
 from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
-from ..runtime import cache
+from ..runtime import cache, run_folder
 from ..runtime.executor import RuntimeConfig, make_executor
 from ..runtime.stages import cached
+from ..render.tags import DRAWING_VERSION
 from ..scene.spec import SceneSpec
 from .discretization import Discretization
 from .discretization import load as load_discretization
@@ -197,13 +200,15 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
             search (None: not checked here).
     """
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_folder.make_dirs(run_dir)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     scene = scene_spec.load()
     timings["load"] = time.perf_counter() - t0
 
-    disc_key = cache.hash_of("discretize-v2", cache.scene_hash(scene), config.discretize)
+    # the parts' names and glass decide which wall spots may carry a tag (plan.wall_candidates)
+    labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
+    disc_key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.discretize)
     disc = cached("discretize", run_dir / "discretization.npz", disc_key, lambda: discretize(scene, config.discretize),
                   save_discretization, load_discretization, timings)
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
@@ -217,7 +222,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     sizes = [config.placement.tag_size] * C + [m.size for m in existing]
     in_view = geometric_visibility(disc.world_from_cam, all_T, config)
 
-    obs_key = cache.hash_of("observe-v2", disc_key, config.imaging, all_T, sizes)
+    obs_key = cache.hash_of("observe-v3", DRAWING_VERSION, disc_key, cache.content_digest(run_dir / "discretization.npz"),
+                            config.imaging, all_T, sizes)
 
     def run_observe() -> FeatureSet:
         log.info("observe: rendering and extracting SIFT at %d poses", N)
@@ -235,9 +241,10 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     log.info("observe: %d features with 3D points (%.0f per pose)", len(pose_index), len(pose_index) / max(N, 1))
 
     if config.placement.similarity:
-        sim_key = cache.hash_of("similarity-v2", obs_key, config.similarity)
+        sim_key = cache.hash_of("similarity-v3", obs_key, cache.content_digest(run_dir / "observations"),
+                                config.similarity)
         n_similar = cached("similarity", run_dir / "similarity.npz", sim_key,
-                           lambda: count_similar(descriptors, points, config.similarity),
+                           lambda: count_similar(descriptors, points, config.similarity, progress=progress),
                            lambda n, path: write_npz(path, n_similar=n),
                            lambda path: np.load(path, allow_pickle=False)["n_similar"], timings)
     else:

@@ -46,12 +46,14 @@ lists are filled in point order, each query's search is independent), which the 
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass
 
 import faiss
 import numpy as np
 
+from ..progress import progress_bar
 from .similarity_search import BAND, Pairs, Searcher, expand_search, faiss_threads, join_cells
 
 log = logging.getLogger(__name__)
@@ -121,13 +123,15 @@ def _check(descriptors: np.ndarray, points_world: np.ndarray, config: Similarity
 
 
 def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
-                  config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
+                  config: SimilarityConfig = SimilarityConfig(), progress: bool = False) -> np.ndarray:
     """n_p for every point: look-alikes (cos > threshold) farther than ``min_distance``.
 
     Args:
         descriptors: (P, D) descriptors (e.g. OpenCV SIFT, D = 128, uint8 or float, any scale).
         points_world: (P, 3) 3D points, world metres.
         config: settings; ``method`` picks the algorithm.
+        progress: show progress (a bar on a terminal, log lines otherwise; see
+            :func:`markerplace.progress.progress_bar`).
 
     Returns:
         (P,) int32 counts (excluding the point itself).
@@ -140,7 +144,10 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
         method = "exact" if len(descriptors) <= config.exact_max_points else "ivf"
     log.info("similarity (%s): counting look-alikes of %d points", method, len(descriptors))
     t0 = time.perf_counter()
-    out = (count_similar_exact if method == "exact" else count_similar_ivf)(descriptors, points_world, config)
+    if method == "exact":
+        out = count_similar_exact(descriptors, points_world, config, progress=progress)
+    else:
+        out = count_similar_ivf(descriptors, points_world, config, progress=progress)
     log.info("similarity (%s): %d points, mean n_p %.2f, %.1f s", method, len(out),
              float(out.mean()) if len(out) else 0.0, time.perf_counter() - t0)
     return out
@@ -148,13 +155,14 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
 
 def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
                         config: SimilarityConfig = SimilarityConfig(),
-                        queries: np.ndarray | None = None) -> np.ndarray:
+                        queries: np.ndarray | None = None, progress: bool = False) -> np.ndarray:
     """Exact n_p: ``IndexFlatIP`` range search over all points (O(P^2 D) time).
 
     Args:
         descriptors, points_world, config: as :func:`count_similar`.
         queries: optional (Q,) row indices: count only these points (against all P points),
             e.g. a sample to measure the error of :func:`count_similar_ivf` on a large input.
+        progress: show progress over the points searched.
 
     Returns:
         (P,) int32 counts, or (Q,) for ``queries``; equal to float64 brute force.
@@ -163,10 +171,10 @@ def count_similar_exact(descriptors: np.ndarray, points_world: np.ndarray,
     _check(descriptors, np.asarray(points_world), config)
     pairs = Pairs(descriptors, points_world)
     q = np.arange(len(descriptors)) if queries is None else np.asarray(queries, dtype=np.int64)
-    with faiss_threads(config.threads):
+    with faiss_threads(config.threads), progress_bar(len(q), "look-alikes (exact)", "pt", progress) as bar:
         index = faiss.IndexFlatIP(descriptors.shape[1])
         index.add(pairs.X)
-        out, _ = Searcher(index, pairs, pairs.X, config.cos_threshold - BAND, True, config).search(q)
+        out, _ = Searcher(index, pairs, pairs.X, config.cos_threshold - BAND, True, config).search(q, tick=bar.update)
     return out.astype(np.int32)
 
 
@@ -176,11 +184,12 @@ def _nlist(P: int, config: SimilarityConfig) -> int:
 
 
 def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
-                      config: SimilarityConfig = SimilarityConfig()) -> np.ndarray:
+                      config: SimilarityConfig = SimilarityConfig(), progress: bool = False) -> np.ndarray:
     """n_p by an inverted-file range search on PCA-reduced vectors (see module docstring);
     never over-counts.
 
-    Args and returns as :func:`count_similar`.
+    Args and returns as :func:`count_similar`; ``progress`` logs the training and shows the
+    search cell by cell, then the points searched further.
     """
     descriptors = np.asarray(descriptors)
     _check(descriptors, np.asarray(points_world), config)
@@ -196,6 +205,8 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
     d = config.pca_dims if 0 < config.pca_dims < D and n_train >= 4 * D else D  # PCA needs a sample
     train = pairs.X if n_train == P else pairs.X[np.sort(rng.choice(P, n_train, replace=False))]
     t0, c0 = time.perf_counter(), time.process_time()
+    if progress:
+        log.info("look-alikes: training the index (k-means of %d of %d points into %d cells)", n_train, P, nlist)
     with faiss_threads(config.threads):
         if d < D:
             # orthonormal projection (no whitening): reduced distances never exceed full ones
@@ -225,10 +236,18 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
         # every point searches its nprobe nearest cells; a point whose farther half of them
         # still held a candidate searches on (a dense group of look-alikes that k-means split
         # over more than nprobe cells)
-        found_far = join_cells(searcher, cells, first, (nprobe + 1) // 2, counts)
+        with progress_bar(nlist, "look-alikes", "cell", progress) as bar:
+            lock = threading.Lock()
+
+            def tick(n: int) -> None:
+                with lock:
+                    bar.update(n)
+
+            found_far = join_cells(searcher, cells, first, (nprobe + 1) // 2, counts, tick)
         go_on = np.flatnonzero(found_far) if nprobe_max > nprobe else first[:0]
         if len(go_on):
-            expand_search(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts)
+            with progress_bar(len(go_on), "look-alikes (dense groups)", "pt", progress) as bar:
+                expand_search(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts, bar.update)
     log.debug("similarity ivf: %d points, PCA %d, %d cells, nprobe %d, %d points searched further (max %d); "
               "wall (CPU) seconds: train %.1f (%.1f), assign + add %.1f (%.1f), search %.1f (%.1f)",
               P, d, nlist, nprobe, len(go_on), nprobe_max, t1 - t0, c1 - c0, t2 - t1, c2 - c1,

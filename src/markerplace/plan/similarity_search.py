@@ -14,7 +14,7 @@ import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import faiss
 import numpy as np
@@ -115,14 +115,15 @@ class Searcher:
         self.index, self.pairs, self.vectors = index, pairs, vectors
         self.radius, self.cosines, self.config = radius, cosines, config
 
-    def search(self, queries: np.ndarray, probes: tuple[np.ndarray, np.ndarray] | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def search(self, queries: np.ndarray, probes: tuple[np.ndarray, np.ndarray] | None = None,
+               tick: Callable[[int], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Range-search ``queries`` (global row indices) in batches; count look-alikes exactly.
 
         Args:
             queries: (Q,) row indices.
             probes: for the IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid distances):
                 the cells each query searches, -1 = none (``range_search_preassigned``).
+            tick: called with the number of queries done after each batch (progress).
 
         Returns:
             (Q,) int64 counts and (Q,) bool: whether the query had a look-alike among its
@@ -146,17 +147,19 @@ class Searcher:
                     np.ascontiguousarray(probes[1][s:s + len(q)]))
             out[s:s + len(q)], found[s:s + len(q)] = self.pairs.count(
                 q, lims, sims if self.cosines else None, labels, cos_t, min_d2)
+            if tick is not None:
+                tick(len(q))
         return out, found
 
 
 def expand_search(searcher: Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
-                  counts: np.ndarray) -> None:
+                  counts: np.ndarray, tick: Callable[[int], None] | None = None) -> None:
     """Search ``queries`` in further cells, by doubling rings: the nearest 2 n cells, then 4 n, ...
     (n = ``searched.shape[1]``) up to ``nprobe_max``, while the last ring held a look-alike.
 
     ``searched``: (Q, n) cells already searched. A cell is searched at most once per query (a
     bitmap of visited cells, even if the quantizer ranks ties differently between calls), so no
-    pair is counted twice. Adds to ``counts``.
+    pair is counted twice. Adds to ``counts``; ``tick(n)`` after each chunk of ``n`` queries.
     """
     nlist = searcher.index.nlist
     chunk = max(1, (1 << 26) // nlist)  # visited bitmaps of at most 64 MB
@@ -176,10 +179,12 @@ def expand_search(searcher: Searcher, quantizer, queries: np.ndarray, searched: 
             counts[q[active]] += c
             active = active[found]
             lo = hi
+        if tick is not None:
+            tick(len(q))
 
 
 def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
-               counts: np.ndarray) -> np.ndarray:
+               counts: np.ndarray, tick: Callable[[int], None] | None = None) -> np.ndarray:
     """Range-search every point in its probed cells, one cell at a time; add to ``counts``.
 
     The same pairs as ``range_search_preassigned`` with each point's ``cells``, but grouped by
@@ -197,6 +202,8 @@ def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
         first: (P,) the cell each point is filed in (``cells[:, 0]``).
         h: probe ranks ``>= h`` are the farther cells whose look-alike candidates are reported.
         counts: (P,) int64, incremented by each point's look-alike count.
+        tick: called with 1 after each cell, from the worker threads (progress; must be
+            thread-safe).
 
     Returns:
         (P,) bool: the point had a look-alike candidate (any 3D distance) in a cell of rank >= h.
@@ -224,7 +231,11 @@ def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
             m = members[member_lims[b]:member_lims[b + 1]]
             pr = probes[probe_lims[b]:probe_lims[b + 1]]
             if len(m) == 0 or len(pr) == 0:
+                if tick is not None:
+                    tick(1)
                 continue
+            if tick is not None:
+                tick(1)
             q, rank = pr // n, pr % n
             flat.reset()
             flat.add(Y[m])

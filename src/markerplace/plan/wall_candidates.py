@@ -1,4 +1,5 @@
-"""Candidate marker poses: wall spots at eye level that face free space and hold a flat tag.
+"""Candidate marker poses: wall spots at eye level that face free space, hold a flat tag and are
+on structure that stays (a wall or a column, not a window, a door, a picture or a bookcase).
 
 Per storey, every camera location takes a virtual 360-degree range scan at its eye level
 (``scan_rays`` horizontal rays on the ray engine, up to ``max_scan_range``): the scan points on
@@ -7,16 +8,39 @@ of the wall) is in the storey's free region are the wall spots, facing the scann
 in the paper they are downsampled uniformly along the perimeter of the free space
 (``marker_spacing`` apart unless their normals differ by more than ``normal_diff_deg``) and
 each tag stands ``height`` above the local floor in front of it. Rules a person would apply
-remove spots, counted per rule:
+remove spots, each spot counted under the first rule that removes it, in this order
+(:data:`RULES`):
 
-* ``glass``: the wall there is transparent (:attr:`markerplace.scene.types.MeshPart.transparent`);
+* ``glass``: the surface is transparent (:attr:`markerplace.scene.types.MeshPart.transparent`);
+  never allowed.
+* a category the part's names put it in (:mod:`markerplace.scene.semantics`: ``doors``,
+  ``windows``, ``curtains``, ``mirrors``, ``screens``, ``furniture``, ``pictures``), unless
+  the category is in ``allow``;
 * ``does not fit``: the tag and its white border (``tag_border`` of the size per side) do not
-  lie flat on one surface (within ``flatness_tol``): a corner, a door opening, an edge, a
-  surface smaller than the tag, or something in front of the wall.
+  lie flat (within ``flatness_tol``) on surfaces that may carry it: a corner, a door opening, an
+  edge, a surface smaller than the tag, something in front of the wall, or part of the square
+  on glass or a category not allowed;
+* ``off-wall`` (geometry; for parts no name puts in a category): the surface stands off the
+  wall plane and does not reach the ceiling: going up from the tag it ends below the ceiling
+  with the wall behind it (or nothing) up to the ceiling, or it ends so also on its left, right
+  or lower side (a picture, a mirror, a screen, a cupboard front or a fridge's side nobody
+  named);
+* ``in-opening`` (geometry): the surface is set back into the wall: going up, left and right
+  it ends at a surface up to ``max_reveal`` in front of it (a door leaf or a window panel in its
+  opening, nobody named).
 
-Counts are of the uniformly spaced spots (first pass, no rules); the chosen candidates (second
-pass) replace a removed spot by the next one along the wall that passes. A third rule, no
-camera pose sees the tag, needs rendered depth and is applied by the planner.
+``allow`` lifts the categories and the two geometric rules it names. Counts are of the
+uniformly spaced spots (first pass, no rules), so they add up: spots = the removed of every rule
++ those that pass. The chosen candidates (second pass) are those that pass, less any crowded out
+by the next, plus the next spot along the wall that passes for each removed one (a picture
+moves the tag beside it), so the candidates = pass - crowded + added. A last rule, no camera pose
+sees the tag, needs rendered depth and is applied by the planner.
+
+Each candidate records what it is on (:attr:`WallCandidates.surface`: ``"wall"``,
+``"column"``, or for an allowed category e.g. ``"bookshelf front"``, ``"door"``) and the name of
+the mesh part (:attr:`WallCandidates.part`).
+
+The settings and the rules themselves live in :mod:`markerplace.plan.candidate_rules`.
 
 Frames: world z up, metres; normals are horizontal unit vectors towards the free space.
 """
@@ -29,46 +53,17 @@ from typing import Callable
 
 import numpy as np
 
+from .candidate_rules import (ALLOWABLE, GEOMETRIC, RULES, CandidateConfig, SurfaceLabels, rule_words, surface_shape,
+                              tag_fits)
 from .floorplan import StoreyFloor
 from .grid import Grid
 from ..scene.raycast import RayCaster
+from ..scene.semantics import CATEGORIES, PartKind
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CandidateConfig", "WallCandidates", "wall_candidates", "tag_fits"]
-
-UP = np.array([0.0, 0.0, 1.0])
-
-
-@dataclass(frozen=True)
-class CandidateConfig:
-    """Settings of candidate marker poses.
-
-    Attributes:
-        height: tag centre above the local floor, metres (eye level).
-        marker_spacing: candidates are at least this far apart (metres) unless their normals
-            differ by more than ``normal_diff_deg`` degrees.
-        normal_diff_deg: see ``marker_spacing``.
-        tag_size: edge of the black square that must fit flat, metres.
-        tag_border: white border around it that must be flat too, as a fraction of
-            ``tag_size`` per side (0.25: the rendered tag's 2-bit quiet zone).
-        flatness_tol: every sampled point of the tag square within this of the plane, metres.
-        max_normal_z: |n_z| of a wall's face below this (near-vertical).
-        scan_rays: rays per 360-degree scan.
-        max_scan_range: range of a scan ray, metres.
-        front_offset: the point this far in front of a wall spot must be free, metres.
-    """
-
-    height: float = 1.5
-    marker_spacing: float = 1.0
-    normal_diff_deg: float = 30.0
-    tag_size: float = 0.4
-    tag_border: float = 0.25
-    flatness_tol: float = 0.02
-    max_normal_z: float = 0.2
-    scan_rays: int = 720
-    max_scan_range: float = 10.0
-    front_offset: float = 0.15
+__all__ = ["ALLOWABLE", "CandidateConfig", "RULES", "SurfaceLabels", "WallCandidates", "wall_candidates", "tag_fits",
+           "surface_shape", "rule_words"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,7 +77,13 @@ class WallCandidates:
         arclength: (C,) position along the free-space perimeters (storeys' loops
             concatenated), metres.
         perimeter_length: total length of those loops, metres.
-        removed: spots removed per rule (``glass``, ``does not fit``) and ``spots`` in all.
+        removed: the first pass's counts: ``spots`` in all, the spots removed per rule of
+            :data:`RULES` and ``pass``; and of the second pass ``crowded`` (passing spots
+            crowded out) and ``added`` (spots beside removed ones): candidates = pass -
+            crowded + added.
+        surface: (C,) what each candidate is on: ``"wall"``, ``"column"``, or for an allowed
+            category e.g. ``"bookshelf front"``.
+        part: (C,) the name of the mesh part under each candidate's centre.
     """
 
     position: np.ndarray
@@ -91,6 +92,8 @@ class WallCandidates:
     arclength: np.ndarray
     perimeter_length: float
     removed: dict = field(default_factory=dict)
+    surface: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+    part: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
 
 
 def perimeter(free: np.ndarray, grid: Grid, min_length: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
@@ -114,45 +117,6 @@ def perimeter(free: np.ndarray, grid: Grid, min_length: float = 0.5) -> tuple[np
     if not pts:
         return np.zeros((0, 2)), np.zeros(0), 0.0
     return np.vstack(pts), np.concatenate(arc), total
-
-
-def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: CandidateConfig,
-             opaque: np.ndarray | None = None, n_side: int = 7, standoff: float = 0.3) -> np.ndarray:
-    """(M,) bool: a tag of ``tag_size`` plus border centred at each (M, 3) point lies flat.
-
-    Short rays along -normal from ``standoff`` in front of the wall, over an n_side x n_side
-    grid of the tag square plus border, must all hit (an opaque face, when ``opaque`` (F,) is
-    given) within ``flatness_tol`` of the plane through the centre, and the sample origins must
-    be reachable from the point in front of the centre (a ray starting inside a perpendicular
-    wall would otherwise hide an inner corner).
-    """
-    M = len(centers)
-    if M == 0:
-        return np.zeros(0, dtype=bool)
-    h = config.tag_size * (0.5 + config.tag_border)
-    a = np.linspace(-h, h, n_side)
-    A, B = (v.ravel() for v in np.meshgrid(a, a))
-    n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    x = np.cross(np.tile(UP, (M, 1)), n)
-    x /= np.linalg.norm(x, axis=1, keepdims=True)
-    y = np.tile(UP, (M, 1))
-    o = centers[:, None] + A[None, :, None] * x[:, None] + B[None, :, None] * y[:, None] + standoff * n[:, None]
-    d = np.repeat(-n[:, None], len(A), axis=1)
-    t, f = rc.first_hits(o.reshape(-1, 3), d.reshape(-1, 3), standoff + 0.3)
-    t, f = t.reshape(M, -1), f.reshape(M, -1)
-    ok = np.all(np.isfinite(t), axis=1)
-    if opaque is not None:
-        ok &= np.all(np.where(f >= 0, opaque[np.maximum(f, 0)], False), axis=1)
-    front = centers + standoff * n
-    off = o - front[:, None]
-    length = np.linalg.norm(off, axis=2)
-    lat = length > 1e-9
-    rows = np.repeat(np.arange(M)[:, None], len(A), axis=1)[lat]
-    tl, _ = rc.first_hits(front[rows], off[lat] / length[lat][:, None], length[lat])
-    blocked = np.isfinite(tl)
-    ok &= ~np.bincount(rows[blocked], minlength=M).astype(bool)
-    dev = np.where(np.isfinite(t), np.abs(t - standoff), np.inf)
-    return ok & np.all(dev <= config.flatness_tol, axis=1)
 
 
 def _scan_points(rc: RayCaster, origins: np.ndarray, config: CandidateConfig, batch_rays: int = 2_000_000):
@@ -207,10 +171,10 @@ def _space_out(xy: np.ndarray, n2: np.ndarray, spacing: float, cos_diff: float,
 
 def _storey_spots(rc: RayCaster, grid: Grid, floor: StoreyFloor, free: np.ndarray, locations: np.ndarray,
                   config: CandidateConfig):
-    """Wall spots of one storey ordered along its perimeter: xy, n2, z, face, arclength, length."""
+    """Wall spots of one storey ordered along its perimeter: xy, n2, z, face, arclength, floor z, length."""
     from scipy.spatial import cKDTree
 
-    empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0))
+    empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
     per_xy, per_arc, per_len = perimeter(free, grid)
     if len(locations) == 0 or per_len == 0:
         return (*empty, per_len)
@@ -234,57 +198,113 @@ def _storey_spots(rc: RayCaster, grid: Grid, floor: StoreyFloor, free: np.ndarra
     hxy, face, n2, front, s = hxy[near], face[near], n2[near], front[near], per_arc[j[near]]
     order = np.lexsort((hxy[:, 1], hxy[:, 0], s))
     hxy, face, n2, front, s = hxy[order], face[order], n2[order], front[order], s[order]
-    z = grid.lookup(floor.height, front, np.nan) + config.height
+    fz = grid.lookup(floor.height, front, np.nan)
+    z = fz + config.height
     ok = np.isfinite(z)
-    return hxy[ok], n2[ok], z[ok], face[ok], s[ok], per_len
+    return hxy[ok], n2[ok], z[ok], face[ok], s[ok], fz[ok], per_len
 
 
-def wall_candidates(rc: RayCaster, face_transparent: np.ndarray, grid: Grid, storeys: list, config: CandidateConfig
-                    ) -> WallCandidates:
+def _surface_phrase(kind: PartKind, geometric: str | None, column: bool) -> str:
+    """What a candidate is on, for the report and placement.json."""
+    if kind.category in CATEGORIES:
+        return f"{kind.noun} front" if kind.category == "furniture" else kind.noun
+    if geometric == "off-wall":
+        return "surface standing off the wall"
+    if geometric == "in-opening":
+        return "panel in a wall opening"
+    return "column" if column or kind.noun == "column" else "wall"
+
+
+def wall_candidates(rc: RayCaster, labels: SurfaceLabels | np.ndarray, grid: Grid, storeys: list,
+                    config: CandidateConfig) -> WallCandidates:
     """Candidate marker poses of every storey (see the module docstring).
 
     Args:
         rc: the ray engine on the whole model.
-        face_transparent: (F,) bool per face of ``rc``.
+        labels: what each face of ``rc`` is (:class:`SurfaceLabels`), or (F,) bool per face:
+            transparent (an unnamed mesh).
         grid: the floor maps' grid.
         storeys: one ``(floor, free, locations)`` per storey: its
             :class:`~markerplace.plan.floorplan.StoreyFloor`, (H, W) bool free region and (L, 3)
             camera positions (eye level).
         config: settings.
     """
-    opaque = ~np.asarray(face_transparent, dtype=bool)
+    if not isinstance(labels, SurfaceLabels):
+        labels = SurfaceLabels.plain(labels)
+    unknown = sorted(set(config.allow) - set(ALLOWABLE))
+    if unknown:
+        raise ValueError(f"unknown allow categories {unknown}; known: {list(ALLOWABLE)}")
+    allow = set(config.allow)
+    P = len(labels.kind)
+    cat = np.array([k.category for k in labels.kind] or [""], dtype=object)[:P]
+    named = np.array([c in CATEGORIES for c in cat], bool)
+    forbidden_part = named & ~np.array([c in allow for c in cat], bool)
+    # per face: glass, or a part whose name is a category not allowed, never carries a tag
+    part_ok = ~labels.transparent & ~forbidden_part
+    face_ok = part_ok[labels.face_part]
     cos_diff = np.cos(np.radians(config.normal_diff_deg))
-    pos, nrm, sto, arc = [], [], [], []
-    removed = {"spots": 0, "glass": 0, "does not fit": 0}
+    pos, nrm, sto, arc, surf, part_names = [], [], [], [], [], []
+    removed = {"spots": 0, **{r: 0 for r in RULES}, "pass": 0, "crowded": 0, "added": 0}
     offset = 0.0
+    geo_rules = [g for g in GEOMETRIC if g not in allow]
     for k, (floor, free, locations) in enumerate(storeys):
-        xy, n2, z, face, s, per_len = _storey_spots(rc, grid, floor, free, np.asarray(locations, float).reshape(-1, 3), config)
-        P = np.column_stack([xy, z])
+        xy, n2, z, face, s, fz, per_len = _storey_spots(rc, grid, floor, free,
+                                                       np.asarray(locations, float).reshape(-1, 3), config)
+        Pt = np.column_stack([xy, z])
         N = np.column_stack([n2, np.zeros(len(n2))])
-
-        verdict = np.full(len(P), -1, np.int8)  # -1 not tested yet, 0 refused, 1 accepted
+        part = labels.face_part[face] if len(face) else np.zeros(0, np.int64)
+        reason = np.full(len(Pt), -1, np.int16)  # index into RULES; len(RULES): passes; -1 not tested yet
+        shape_of: dict[int, str | None] = {}
+        is_column = np.zeros(len(Pt), bool)
 
         def rules(idx: np.ndarray) -> np.ndarray:
-            todo = idx[verdict[idx] < 0]
-            good = opaque[face[todo]]
-            if good.any():
-                good[good] = tag_fits(rc, P[todo[good]], N[todo[good]], config, opaque)
-            verdict[todo] = good
-            return verdict[idx] == 1
+            todo = idx[reason[idx] < 0]
+            if len(todo):
+                p = part[todo]
+                why = np.full(len(todo), len(RULES), np.int16)
+                why[labels.transparent[p]] = RULES.index("glass")
+                for c in CATEGORIES:
+                    hit = (why == len(RULES)) & (cat[p] == c) & (c not in allow)
+                    why[hit] = RULES.index(c)
+                go = np.flatnonzero(why == len(RULES))
+                if len(go):
+                    fits = tag_fits(rc, Pt[todo[go]], N[todo[go]], config, face_ok)
+                    why[go[~fits]] = RULES.index("does not fit")
+                    go = go[fits]
+                unnamed = go[~named[p[go]]]
+                if len(unnamed):
+                    shape = surface_shape(rc, Pt[todo[unnamed]], N[todo[unnamed]], fz[todo[unnamed]], config)
+                    is_column[todo[unnamed]] = shape["column"]
+                    for g in GEOMETRIC:
+                        hit = shape[g] & (why[unnamed] == len(RULES))
+                        if g in geo_rules:
+                            why[unnamed[hit]] = RULES.index(g)
+                        else:
+                            for i in todo[unnamed[hit]]:
+                                shape_of[int(i)] = g
+                reason[todo] = why
+            return reason[idx] == len(RULES)
 
         nominal = np.asarray(_space_out(xy, n2, config.marker_spacing, cos_diff, lambda idx: np.ones(len(idx), bool)), int)
-        glass = ~opaque[face[nominal]]
-        fits = rules(nominal)
+        passes = rules(nominal)
         removed["spots"] += len(nominal)
-        removed["glass"] += int(glass.sum())
-        removed["does not fit"] += int((~glass & ~fits).sum())
+        for i, rule in enumerate(RULES):
+            removed[rule] += int((reason[nominal] == i).sum())
+        removed["pass"] += int(passes.sum())
         chosen = np.asarray(_space_out(xy, n2, config.marker_spacing, cos_diff, rules), int)
-        pos.append(P[chosen])
+        passing = set(nominal[passes].tolist())
+        kept = sum(1 for c in chosen.tolist() if c in passing)
+        removed["crowded"] += int(passes.sum()) - kept
+        removed["added"] += len(chosen) - kept
+        pos.append(Pt[chosen])
         nrm.append(N[chosen])
         sto.append(np.full(len(chosen), k, np.int64))
         arc.append(s[chosen] + offset)
+        surf += [_surface_phrase(labels.kind[part[c]], shape_of.get(int(c)), bool(is_column[c])) for c in chosen]
+        part_names += [labels.name[part[c]] for c in chosen]
         offset += per_len
-    if not pos:
-        return WallCandidates(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), 0.0, removed)
+    if not pos or not sum(len(p) for p in pos):
+        return WallCandidates(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), float(offset),
+                              removed, np.zeros(0, "<U1"), np.zeros(0, "<U1"))
     return WallCandidates(np.concatenate(pos), np.concatenate(nrm), np.concatenate(sto), np.concatenate(arc),
-                          float(offset), removed)
+                          float(offset), removed, np.array(surf, dtype=str), np.array(part_names, dtype=str))

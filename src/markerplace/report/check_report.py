@@ -6,10 +6,14 @@ metres, the file's coordinates):
 
 * ``check.json``: summary (mean and 10th-percentile score planned vs installed, nats), one row
   per planned spot and per extra tag (status, shift in metres and degrees, score lost, what to
-  do), and the camera locations that lost most (storey, floor height, x, y, score drop);
+  do in words and as ``move``: right/up/out metres and turns as you face the spot's wall,
+  :func:`markerplace.plan.check.correction`), and the camera locations that lost most (storey,
+  floor height, x, y, score drop);
 * ``check.csv``: the per-tag rows as a table;
 * ``check_map.png``: per camera location the score lost (mean over yaws; dark = more lost), the
-  installed tags numbered by id and the planned spots as ticks, one panel per storey;
+  installed tags numbered by their spot's placement order as on ``placement.png`` (an extra tag
+  by ``+`` and its id), the planned spots as ticks and each missing tag as a magenta cross with
+  its number, one panel per storey;
 * ``tagmaps/``: the known-tag maps of the tags as installed (what the robot should load;
   :mod:`markerplace.report.tagmaps`).
 """
@@ -24,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
-from ..io_utils import atomic_path, write_json
+from ..io_utils import atomic_path, fixed, write_json
+from ..runtime import run_folder
 
 log = logging.getLogger(__name__)
 
@@ -57,9 +62,12 @@ def _warn_off_wall(scene, markers) -> None:
 
 
 def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
-              radius: float | None = None, workers: int = 1, progress: bool = True) -> tuple[Path, str]:
+              radius: float | None = None, workers: int = 1, progress: bool = True,
+              adopt: bool = False) -> tuple[Path, str]:
     """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
-    (default ``plan_dir/check``). Returns the folder and the text summary printed by the CLI."""
+    (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
+    not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
+    folder and the text summary printed by the CLI."""
     from ..plan import check
     from ..plan.folder import read_plan_folder
     from ..plan.planner import prepare
@@ -69,9 +77,8 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     folder = read_plan_folder(plan_dir)
     installed_user = load_installed(installed_path, folder.config.placement.tag_size)
     out = Path(out_dir) if out_dir is not None else folder.path / "check"
-    from ..output_checks import check_output_dir
-
-    check_output_dir(out)
+    run_folder.open_run_folder(folder.path, "check", adopt=adopt, option="PLAN_DIR")  # its caches may be rewritten
+    run_folder.open_run_folder(out, "check", adopt=adopt)
     spec = folder.spec
     scene = spec.load()
     offset = world_offset(scene)
@@ -110,7 +117,7 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
     from .deliverables import write_known_tag_maps
     from .figures import floor_map, per_location_mean
 
-    out.mkdir(parents=True, exist_ok=True)
+    run_folder.make_dirs(out)
     disc = discretization_to_user(result.disc, offset)
     sp, si = result.score_planned, result.score_installed
     drop = sp - si
@@ -126,7 +133,7 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
                      "score_lost": r.score_lost, "score_lost_seen": r.score_lost_seen,
                      "planned_position": None if P is None else P[:3, 3].tolist(),
                      "installed_position": None if Q is None else Q[:3, 3].tolist(),
-                     "installed_normal": None if Q is None else Q[:3, 2].tolist(), "note": r.note})
+                     "installed_normal": None if Q is None else Q[:3, 2].tolist(), "move": r.move, "note": r.note})
     storeys = np.asarray(disc.storeys, float)
     worst_rows = [{"storey": int(disc.location_storey[l]), "floor_z": float(storeys[disc.location_storey[l]]),
                    "x": float(disc.locations[l, 0]), "y": float(disc.locations[l, 1]),
@@ -141,11 +148,14 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
                                     "worst_locations": worst_rows})
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["order", "planned_id", "installed_id", "status", "shift_m", "shift_deg", "score_lost", "x", "y", "z", "note"])
+    w.writerow(["order", "planned_id", "installed_id", "status", "shift_m", "shift_deg", "move_right_m", "move_up_m",
+                "move_out_m", "score_lost", "x", "y", "z", "note"])
     for r in rows:
         pos = r["installed_position"] or r["planned_position"]
-        w.writerow([r["order"] or "", _s(r["planned_id"]), _s(r["installed_id"]), r["status"], _f(r["shift_m"], 3),
-                    _f(r["shift_deg"], 1), _f(r["score_lost"], 4), *(f"{v:.3f}" for v in pos), r["note"]])
+        mv = r["move"] or {}
+        w.writerow([r["order"] or "", _s(r["planned_id"]), _s(r["installed_id"]), r["status"], fixed(r["shift_m"], 3),
+                    fixed(r["shift_deg"], 1), *(fixed(mv.get(k), 3) for k in ("right_m", "up_m", "out_m")),
+                    fixed(r["score_lost"], 4), *(fixed(v, 3) for v in pos), r["note"]])
     with atomic_path(out / "check.csv") as tmp:
         tmp.write_text(buf.getvalue())
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
@@ -157,14 +167,22 @@ def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str
 
     inst = np.array([m.position for m in installed_user]).reshape(-1, 3)
     plan_xyz = np.array([m.position for m in folder.markers]).reshape(-1, 3)
+    order_of = {r["installed_id"]: r["order"] for r in rows if r["installed_id"] is not None and r["order"]}
+    missing = [r["order"] for r in rows if r["status"] == "missing"]
+    miss_xyz = plan_xyz[[o - 1 for o in missing]].reshape(-1, 3)
     floor_map(out / "check_map.png", occupancy=disc.occupancy, origin=disc.grid_origin, resolution=disc.grid_resolution,
               locations=disc.locations, location_panel=np.array([slots[int(s)] for s in disc.location_storey]),
               panel_titles=[f"storey {s}: floor {storeys[s]:.2f} m" for s in disc.planned_storeys],
-              values=loc_drop, cmap="gray_r", value_range=(0.0, max(float(loc_drop.max(initial=0.0)), 1e-6)), title="Score lost per camera location, installed vs planned (dark = more lost)",
+              values=loc_drop, cmap="gray_r", value_range=(0.0, max(float(loc_drop.max(initial=0.0)), 1e-6)),
+              title="Score lost per camera location, installed vs planned (dark = more lost)\n"
+                    "tags numbered by placement order as on placement.png; +id extra; magenta x missing",
               colorbar_label="mean score drop over yaws (nats)",
               markers_xy=inst[:, :2], markers_normal=np.array([m.normal[:2] for m in installed_user]).reshape(-1, 2),
-              marker_labels=[str(m.tag_id) for m in installed_user], marker_panel=panel(inst[:, 2]),
-              candidates_xy=plan_xyz[:, :2], candidate_panel=panel(plan_xyz[:, 2]))
+              marker_labels=[str(order_of[int(m.tag_id)]) if int(m.tag_id) in order_of else f"+{m.tag_id}"
+                             for m in installed_user], marker_panel=panel(inst[:, 2]),
+              candidates_xy=plan_xyz[:, :2], candidate_panel=panel(plan_xyz[:, 2]),
+              missing_xy=miss_xyz[:, :2], missing_labels=[f"{o} missing" for o in missing],
+              missing_panel=panel(miss_xyz[:, 2]))
     write_known_tag_maps(out / "tagmaps", list(installed_user) + list(folder.existing), "installed", disc,
                          folder.scene, folder.scene_options.get("up"))
     return _text(out, summary, rows, worst_rows)
@@ -174,23 +192,21 @@ def _s(v) -> str:
     return "" if v is None else str(v)
 
 
-def _f(v, digits: int) -> str:
-    return "" if v is None else f"{v:.{digits}f}"
-
-
 def _text(out: Path, summary: dict, rows: list, worst: list) -> str:
     lines = [f"{'spot':>4} {'planned':>7} {'found':>5}  {'status':<10} {'shift m':>7} {'deg':>5} {'lost':>7}  what to do"]
     for r in rows:
         lines.append(f"{_s(r['order']) or '-':>4} {_s(r['planned_id']) or '-':>7} {_s(r['installed_id']) or '-':>5}  "
-                     f"{r['status']:<10} {_f(r['shift_m'], 2) or '-':>7} {_f(r['shift_deg'], 0) or '-':>5} "
-                     f"{r['score_lost']:>7.3f}  {r['note']}")
-    lines.append(f"score (mean -H over {summary['num_poses']} poses): planned {summary['mean_score_planned']:.3f}, "
-                 f"installed {summary['mean_score_installed']:.3f}, lost {summary['mean_score_lost']:.3f} nats; "
-                 f"10th percentile {summary['p10_score_planned']:.3f} -> {summary['p10_score_installed']:.3f}")
+                     f"{r['status']:<10} {fixed(r['shift_m'], 2, '-'):>7} {fixed(r['shift_deg'], 0, '-'):>5} "
+                     f"{fixed(r['score_lost'], 3):>7}  {r['note']}")
+    lines.append(f"score (mean -H over {summary['num_poses']} poses): planned {fixed(summary['mean_score_planned'], 3)}, "
+                 f"installed {fixed(summary['mean_score_installed'], 3)}, lost {fixed(summary['mean_score_lost'], 3)} "
+                 f"nats; 10th percentile {fixed(summary['p10_score_planned'], 3)} -> "
+                 f"{fixed(summary['p10_score_installed'], 3)}")
     if worst:
         lines.append("camera locations that lost most:")
-        lines += [f"  storey {w['storey']} (floor {w['floor_z']:.2f} m) at ({w['x']:.2f}, {w['y']:.2f}): "
-                  f"{w['score_planned']:.2f} -> {w['score_installed']:.2f} (lost {w['score_lost']:.2f} nats)" for w in worst]
+        lines += [f"  storey {w['storey']} (floor {fixed(w['floor_z'], 2)} m) at ({fixed(w['x'], 2)}, {fixed(w['y'], 2)}): "
+                  f"{fixed(w['score_planned'], 2)} -> {fixed(w['score_installed'], 2)} (lost {fixed(w['score_lost'], 2)} "
+                  "nats)" for w in worst]
     else:
         lines.append("no camera location lost anything")
     lines.append(f"wrote {out}/check.json, check.csv, check_map.png, tagmaps/ (the tags as installed)")

@@ -45,15 +45,14 @@ def write_deliverables(out_dir: str | Path, records: Sequence[dict], markers: Se
 
 def write_known_tag_maps(folder: Path, markers: Sequence, name: str, disc, scene_source: str, up: str | None) -> list:
     """``tagmaps/``: the known-tag maps of ``markers`` (user frame) in the model frame and, for a
-    file whose up axis is not z, in the file's axes (``*_<axis>up.*``); maps an earlier run left
-    in other axes are removed. Returns the files written."""
+    file whose up axis is not z, in the file's axes (``*_<axis>up.*``); maps an earlier run
+    wrote in other axes are removed (other files are left alone). Returns the files written."""
+    from ..runtime import run_folder
     from ..scene.source import file_up_axis, world_from_file_rotation
 
     axis = file_up_axis(scene_source, up)
     written = write_tag_maps(folder, list(markers), name=name, field=field_extent(disc),
                              world_from_file=world_from_file_rotation(scene_source, up),
                              file_suffix=f"_{axis.replace('-', 'neg')}up" if axis else "_yup")
-    for old in set(Path(folder).glob("*")) - set(written):  # maps of an earlier run in other axes
-        if old.is_file():
-            old.unlink()
+    run_folder.remove_stale(folder, written)  # maps of an earlier run in other axes
     return written

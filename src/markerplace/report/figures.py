@@ -19,6 +19,9 @@ import numpy as np  # noqa: E402
 
 from ..io_utils import atomic_path  # noqa: E402
 
+MISSING_COLOR = "#ff00ff"
+"""Colour of the crosses that mark missing tags (magenta: no colour map here uses it)."""
+
 
 def per_location_mean(values: np.ndarray, location_index: np.ndarray, num_locations: int) -> np.ndarray:
     """(N,) per-pose values -> (L,) mean per camera location."""
@@ -53,7 +56,9 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
               markers_normal: np.ndarray | None = None, marker_labels: Sequence[str] | None = None,
               candidates_xy: np.ndarray | None = None, panel_titles: Sequence[str] | None = None,
               location_panel: np.ndarray | None = None, marker_panel: np.ndarray | None = None,
-              candidate_panel: np.ndarray | None = None, value_range: tuple[float, float] | None = None) -> None:
+              candidate_panel: np.ndarray | None = None, value_range: tuple[float, float] | None = None,
+              missing_xy: np.ndarray | None = None, missing_labels: Sequence[str] | None = None,
+              missing_panel: np.ndarray | None = None) -> None:
     """Write a top-down map as PNG, one panel per storey.
 
     Args:
@@ -72,6 +77,8 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
         location_panel / marker_panel / candidate_panel: panel index of each location, marker
             and candidate (default: all on panel 0).
         value_range: (lo, hi) the colour scale must include (default: the values' range).
+        missing_xy / missing_labels / missing_panel: (K, 2) spots where a tag is missing, drawn as
+            large :data:`MISSING_COLOR` crosses with their labels, and their panels.
     """
     occ = np.asarray(occupancy)
     if occ.ndim == 2:
@@ -105,6 +112,13 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
             mp = panel_of(marker_panel, len(markers_xy)) == k
             labels = None if marker_labels is None else [lab for lab, m in zip(marker_labels, mp) if m]
             _arrows(ax, np.asarray(markers_xy)[mp], np.asarray(markers_normal)[mp], labels)
+        if missing_xy is not None and len(missing_xy):
+            xy = np.asarray(missing_xy, float).reshape(-1, 2)
+            kp = panel_of(missing_panel, len(xy)) == k
+            ax.scatter(xy[kp, 0], xy[kp, 1], marker="x", s=160, linewidths=3, c=MISSING_COLOR, zorder=7)
+            for p, text in zip(xy[kp], [t for t, m in zip(missing_labels or [""] * len(xy), kp) if m]):
+                ax.annotate(text, (p[0], p[1]), xytext=(8, 8), textcoords="offset points", color=MISSING_COLOR,
+                            fontsize=8, fontweight="bold", zorder=7)
         _crop(ax, occ[k], origin, resolution)
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")

@@ -1,6 +1,8 @@
-"""Self-contained HTML pages: images embedded as data URIs, CSS inline, no script, no network.
+"""Self-contained HTML pages: images embedded as data URIs, CSS inline, no network.
 
 A page opens from disk in any browser, can be mailed as one file, and shows the same offline.
+The only script is the plan report's review buttons (:mod:`markerplace.report.review`: inline,
+no library; it builds its download as a ``data:`` URL).
 Helpers here build the pieces (escaped text, tables, figures, markdown tables from
 ``tables.md``) and :func:`write_page` writes the document atomically.
 """
@@ -38,6 +40,10 @@ figure { margin: 0.5em 0; } figcaption { font-size: 0.85em; color: #555; }
 .failed { display: flex; align-items: center; justify-content: center; min-height: 160px; background: #f4f4f4;
           border: 1px dashed #aaa; color: #a00; font-weight: bold; }
 .good { color: #176317; } .bad { color: #a00; }
+.review { border: 1px solid #bbb; border-radius: 6px; padding: 0.5em 1em; background: #fafafa; }
+button.mp-reject { font: inherit; padding: 0.25em 0.8em; border: 1px solid #a00; color: #a00; background: #fff;
+                   border-radius: 4px; cursor: pointer; } button.mp-reject.on { background: #a00; color: #fff; }
+a.mp-download[aria-disabled="true"] { color: #888; pointer-events: none; }
 """
 
 

@@ -20,11 +20,17 @@ Per tag, in placement order:
 * ``paper="none"``: one page per tag at the sheet's own size plus a white margin (for a print
   shop or a plotter).
 
-:func:`tile_layout` is the tiling geometry (tests reassemble tiled tags from it).
+Every page names its tag (placement order and id); a tile page also names its tile (row and
+column of rows x columns). :func:`sheet_plan` says which pages hold which tag before anything is
+written (placement.csv lists them); :func:`write_tags_pdf` logs the sheets per tag and in all,
+and warns when a tag takes more than :data:`MAX_SHEETS_PER_TAG` sheets, with what the
+alternatives cost (:func:`sheet_advice`). :func:`tile_layout` is the tiling geometry (tests
+reassemble tiled tags from it).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +40,8 @@ from ..errors import UserError
 from ..io_utils import atomic_path
 from ..render.tags import outer_size
 from .printable import caption_for, tag_modules
+
+log = logging.getLogger(__name__)
 
 PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4), "a3": (297.0, 420.0)}
 """Portrait paper sizes (width, height), millimetres."""
@@ -47,6 +55,8 @@ CHECK_BAR_MM = 100.0
 MARK_RGB = (0.0, 1.0, 1.0)
 """Alignment marks in cyan: visible on black and white, light enough for the detector."""
 PT_PER_MM = 72.0 / 25.4
+MAX_SHEETS_PER_TAG = 4
+"""A tag that takes more sheets than this (page map included) gets a warning with alternatives."""
 
 
 @dataclass(frozen=True)
@@ -218,6 +228,115 @@ def _sheet_fits(sheet: tuple[float, float], paper: str) -> tuple[float, float] |
     return None
 
 
+@dataclass(frozen=True)
+class TagSheets:
+    """Where one tag goes in ``tags.pdf``.
+
+    Attributes:
+        sheet: (width, height) mm of the tag's sheet (the square with its quiet zone, and the caption).
+        page: (width, height) mm of its page (single page or ``paper="none"``), None when tiled.
+        layout: its :class:`TileLayout` when tiled (a page map, then one page per tile), else None.
+        first_page: 1-based number of its first page in the file.
+    """
+
+    sheet: tuple[float, float]
+    page: tuple[float, float] | None
+    layout: TileLayout | None
+    first_page: int
+
+    @property
+    def count(self) -> int:
+        """Sheets of paper the tag takes (a tiled tag's page map included)."""
+        return 1 if self.layout is None else 1 + len(self.layout.tiles)
+
+    @property
+    def pages(self) -> list[int]:
+        """1-based page numbers of the tag in ``tags.pdf``."""
+        return list(range(self.first_page, self.first_page + self.count))
+
+    @property
+    def tiles(self) -> tuple[int, int]:
+        """(rows, columns) of its tiles; (1, 1) on one page."""
+        return (1, 1) if self.layout is None else (self.layout.rows, self.layout.cols)
+
+
+def _check_paper(paper: str) -> str:
+    paper = str(paper).lower()
+    if paper not in PAPER_CHOICES:
+        raise UserError(f"--paper {paper!r} is not a paper size; use one of {', '.join(PAPER_CHOICES)}")
+    return paper
+
+
+def _tag_sheets(rec: dict, paper: str, first_page: int) -> TagSheets:
+    edge = 1000.0 * outer_size(rec["size"])
+    strip = caption_block_mm(edge, caption_for(rec))[0]
+    sheet = (edge, edge + strip)
+    if paper == "none":
+        return TagSheets(sheet, (sheet[0] + 2 * MARGIN_MM, sheet[1] + 2 * MARGIN_MM), None, first_page)
+    page = _sheet_fits(sheet, paper)
+    if page is not None:
+        return TagSheets(sheet, page, None, first_page)
+    return TagSheets(sheet, None, tile_layout(edge, paper), first_page)
+
+
+def sheet_plan(records: Sequence[dict], paper: str = "a4") -> list[TagSheets]:
+    """Where each marker record goes in ``tags.pdf`` (one :class:`TagSheets` per record, in order)."""
+    paper = _check_paper(paper)
+    out, page = [], 1
+    for rec in records:
+        out.append(_tag_sheets(rec, paper, page))
+        page += out[-1].count
+    return out
+
+
+def _sheets_words(t: TagSheets, paper: str) -> str:
+    if t.layout is None:
+        return "1 sheet" if paper != "none" else f"1 page of {t.page[0]:.0f} x {t.page[1]:.0f} mm"
+    return f"{t.count} {paper.upper()} sheets (a page map and {t.layout.rows} x {t.layout.cols} tiles to tape)"
+
+
+def sheet_advice(records: Sequence[dict], paper: str) -> tuple[str, str | None]:
+    """What printing ``records`` on ``paper`` takes, in words: (summary, warning or None).
+
+    The warning (when a tag takes more than :data:`MAX_SHEETS_PER_TAG` sheets) offers A3, a print
+    shop (``--paper none``) and the largest ``--tag-size`` that fits the limit on ``paper``, with
+    the detection range it costs (roughly proportional to the tag's size).
+    """
+    paper = _check_paper(paper)
+    plan = sheet_plan(records, paper)
+    total = sum(t.count for t in plan)
+    groups: dict[tuple[float, str], int] = {}
+    for r, t in zip(records, plan):
+        key = (float(r["size"]), _sheets_words(t, paper))
+        groups[key] = groups.get(key, 0) + 1
+    where = "pages of their own size" if paper == "none" else paper.upper()
+    summary = (f"tags.pdf: {len(records)} tag(s) on {where}: "
+               + "; ".join(f"{n} tag(s) of {size:g} m, {words} each" for (size, words), n in groups.items())
+               + f"; {total} sheet(s) in all")
+    big = [(r, t) for r, t in zip(records, plan) if t.count > MAX_SHEETS_PER_TAG]
+    if not big:
+        return summary, None
+    rec, worst = max(big, key=lambda rt: rt[1].count)
+    options = []
+    if paper != "a3":
+        a3 = sheet_plan(records, "a3")
+        options.append(f"--paper a3 ({max(t.count for t in a3)} sheets per tag, {sum(t.count for t in a3)} in all)")
+    sheet = _tag_sheets(rec, "none", 1).page
+    options.append(f"--paper none for a print shop or a plotter (one {sheet[0]:.0f} x {sheet[1]:.0f} mm page per tag)")
+    size = float(rec["size"])
+    fit = next((c / 100 for c in range(int(size * 100) - 1, 4, -1)
+                if _tag_sheets({**rec, "size": c / 100}, paper, 1).count <= MAX_SHEETS_PER_TAG), None)
+    if fit is not None:
+        n = _tag_sheets({**rec, "size": fit}, paper, 1).count
+        options.append(f"a smaller --tag-size: {fit:.2f} m takes {n} {paper.upper()} sheet(s) per tag, but detection "
+                       f"range is roughly proportional to tag size, so it is seen from about {100 * fit / size:.0f} % "
+                       f"as far as a {size:g} m tag")
+    warning = (f"tags.pdf: a {size:g} m tag takes {worst.count} {paper.upper()} sheets to print and tape "
+               f"({len(big)} such tag(s), {sum(t.count for _, t in big)} sheets); for fewer sheets use "
+               + "; or ".join(options))
+    return summary, warning
+
+
 def _single_page(pdf: _Pdf, rec: dict, page: tuple[float, float], with_bar: bool) -> None:
     edge = 1000.0 * outer_size(rec["size"])
     lines = caption_for(rec)
@@ -233,6 +352,11 @@ def _single_page(pdf: _Pdf, rec: dict, page: tuple[float, float], with_bar: bool
     pdf.c.showPage()
 
 
+def _tag_name(rec: dict) -> str:
+    """How every page names its tag: ``"tag #2, id 7"`` (placement order, tag36h11 id)."""
+    return f"tag #{rec['order']}, id {rec['tag_id']}"
+
+
 def _page_map(pdf: _Pdf, rec: dict, lay: TileLayout, paper: str) -> None:
     """The overview page of a tiled tag: scaled tag, tile grid, caption, instructions."""
     page = PAPERS_MM[paper]
@@ -240,9 +364,9 @@ def _page_map(pdf: _Pdf, rec: dict, lay: TileLayout, paper: str) -> None:
     c = pdf.c
     c.setFillColorRGB(0, 0, 0)
     y = MARGIN_MM + 6
-    pdf.text(MARGIN_MM, y, f"Page map: tag {rec['tag_id']} (#{rec['order']}), printed in {lay.rows} x {lay.cols} "
-                           f"tiles on {paper.upper()}", 5.0)
-    for line in caption_for(rec)[:2]:
+    pdf.text(MARGIN_MM, y, f"Page map of {_tag_name(rec)}: {lay.rows} x {lay.cols} tiles on {paper.upper()} "
+                           f"({lay.rows} rows, {lay.cols} columns)", 5.0)
+    for line in caption_for(rec)[1:-1]:
         y += 6
         pdf.text(MARGIN_MM, y, line, 3.6)
     box = min(page[0] - 2 * MARGIN_MM, page[1] * 0.5)
@@ -260,15 +384,16 @@ def _page_map(pdf: _Pdf, rec: dict, lay: TileLayout, paper: str) -> None:
         x0, y0, x1, y1 = (v * scale for v in t.region)
         pdf.text(bx + (x0 + x1) / 2, by + (y0 + y1) / 2 + 2, t.name, 6.0, "centre")
     c.setFillColorRGB(0, 0, 0)
-    y = by + box + 8
+    pdf.text(page[0] / 2, by + box + 5, "this edge down", 3.6, "centre")
+    y = by + box + 12
     steps = [
-        f"1. Print every page at 100 % (actual size, no 'fit to page'); the bar at the bottom of each page must be 100 mm.",
-        f"2. Lay the tiles out as above: rows A, B, ... from the top, columns 1, 2, ... from the left.",
+        "1. Print every page at 100 % (actual size, no 'fit to page'); the bar at the bottom of each page must be 100 mm.",
+        "2. Lay the tiles out as above: rows A, B, ... from the top, columns 1, 2, ... from the left.",
         f"3. Neighbouring tiles share a {lay.overlap:.0f} mm strip with cyan crosshairs: trim the white margin of one",
         "    tile along the printed edge, lay it over its neighbour so every crosshair sits exactly on its twin,",
         "    and tape from the back. Work row by row, then join the rows.",
         f"4. The assembled black square must measure {1000 * rec['size']:.0f} mm; hang it with row "
-        f"{lay.tiles[-1].name[0]} at the bottom (this side down).",
+        f"{lay.tiles[-1].name[0]} at the bottom (marked 'this edge down').",
     ]
     for s in steps:
         pdf.text(MARGIN_MM, y, s, 3.0)
@@ -300,49 +425,44 @@ def _tile_pages(pdf: _Pdf, rec: dict, lay: TileLayout) -> None:
                   (("above", -1, 0), ("left", 0, -1), ("right", 0, 1), ("below", 1, 0))
                   if (t.row + dr, t.col + dc) in names]
         c.setFillColorRGB(0, 0, 0)
-        pdf.text(MARGIN_MM, oy - 6, f"tag {rec['tag_id']} (#{rec['order']})  tile {t.name} of {lay.rows} x {lay.cols}"
-                                    f"  -  {', '.join(around)}", 3.2)
+        pdf.text(MARGIN_MM, oy - 6, f"{_tag_name(rec)}  -  tile {t.name}: row {t.row + 1} of {lay.rows}, column "
+                                    f"{t.col + 1} of {lay.cols}  -  {', '.join(around)}", 3.2)
         if t.row == lay.rows - 1:
-            pdf.text(lay.page[0] - MARGIN_MM, oy + (y1 - y0) + 4, "this side down", 3.2, "right")
+            pdf.text(ox + (x1 - x0) / 2, oy + (y1 - y0) + 4, "this edge down", 3.2, "centre")
         pdf.check_bar(lay.page)
         c.showPage()
 
 
 def write_tags_pdf(path: str | Path, records: Sequence[dict], paper: str = "a4") -> int:
-    """Write ``tags.pdf`` for ``placement.json`` marker records (see module docstring), atomically.
+    """Write ``tags.pdf`` for ``placement.json`` marker records (see module docstring), atomically;
+    log the sheets it takes first (and warn when a tag takes too many: :func:`sheet_advice`).
 
     Args:
         path: output file.
-        records: dicts with ``order``, ``tag_id``, ``family``, ``size`` (metres), ``position``,
+        records: dicts with ``order``, ``tag_id``, ``family``, ``size`` (metres) and either an
+            ``install`` object (:mod:`markerplace.report.instructions`) or ``position`` and
             ``yaw_deg`` (the caption's fields).
         paper: ``a4``, ``letter``, ``a3`` or ``none`` (one page per tag at its own size).
 
     Returns:
-        The number of pages.
+        The number of pages (the last page of :func:`sheet_plan`).
     """
-    paper = str(paper).lower()
-    if paper not in PAPER_CHOICES:
-        raise UserError(f"--paper {paper!r} is not a paper size; use one of {', '.join(PAPER_CHOICES)}")
-    pages = 0
+    paper = _check_paper(paper)
+    plan = sheet_plan(records, paper)
+    if records:
+        summary, warning = sheet_advice(records, paper)
+        log.info("%s", summary)
+        if warning:
+            log.warning("%s", warning)
     with atomic_path(path) as tmp:
         pdf = _Pdf(tmp, "markerplace tags")
-        for rec in records:
-            edge = 1000.0 * outer_size(rec["size"])
-            strip = caption_block_mm(edge, caption_for(rec))[0]
-            sheet = (edge, edge + strip)
-            if paper == "none":
-                _single_page(pdf, rec, (sheet[0] + 2 * MARGIN_MM, sheet[1] + 2 * MARGIN_MM), with_bar=False)
-                pages += 1
-                continue
-            page = _sheet_fits(sheet, paper)
-            if page is not None:
-                _single_page(pdf, rec, page, with_bar=True)
-                pages += 1
-                continue
-            lay = tile_layout(edge, paper)
-            _page_map(pdf, rec, lay, paper)
-            _tile_pages(pdf, rec, lay)
-            pages += 1 + len(lay.tiles)
+        for rec, t in zip(records, plan):
+            if t.layout is None:
+                _single_page(pdf, rec, t.page, with_bar=paper != "none")
+            else:
+                _page_map(pdf, rec, t.layout, paper)
+                _tile_pages(pdf, rec, t.layout)
+        pages = sum(t.count for t in plan)
         if not records:
             pdf.page(PAPERS_MM.get(paper, PAPERS_MM["a4"]))
             pdf.text(MARGIN_MM, MARGIN_MM + 6, "no tags placed", 5.0)
@@ -350,4 +470,3 @@ def write_tags_pdf(path: str | Path, records: Sequence[dict], paper: str = "a4")
             pages = 1
         pdf.c.save()
     return pages
-

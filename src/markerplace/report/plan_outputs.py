@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import logging
+import time
 from pathlib import Path
 from typing import Sequence
 
@@ -14,18 +15,26 @@ from ..runtime.cache import config_dict
 from ..io_utils import atomic_path, write_json, write_npz
 from ..plan.localizability import entropy
 from .figures import floor_map, per_location_mean
+from .instructions import install_to_frame
+from .pdf import sheet_plan
 from .printable import write_tag_sheets
 
 log = logging.getLogger(__name__)
 
-CSV_COLUMNS = ["order", "tag_id", "family", "size_m", "x", "y", "z", "normal_x", "normal_y", "normal_z", "yaw_deg", "gain"]
 
+def placement_records(placement, method: str, disc=None) -> list[dict]:
+    """One JSON-ready dict per placed marker, in placement order.
 
-def placement_records(placement, method: str) -> list[dict]:
-    """One JSON-ready dict per placed marker, in placement order."""
+    With the run's :class:`~markerplace.plan.discretization.Discretization` ``disc``, each
+    record says what the tag is on: ``surface`` (``"wall"``, ``"column"``, or for a category
+    ``--allow`` allowed e.g. ``"bookshelf front"``) and ``surface_part`` (the mesh part's name).
+    """
     rows = []
     for i, (m, c, g) in enumerate(zip(placement.markers, placement.candidates, placement.gains)):
         n = m.normal
+        on = {}
+        if disc is not None:
+            on = {"surface": str(disc.candidate_surface[int(c)]), "surface_part": str(disc.candidate_part[int(c)])}
         rows.append({
             "order": i + 1,
             "tag_id": int(m.tag_id),
@@ -38,41 +47,69 @@ def placement_records(placement, method: str) -> list[dict]:
             "gain": None if not np.isfinite(g) else float(g),
             "candidate_index": int(c),
             "method": method,
+            **on,
         })
     return rows
 
 
-def write_placement(out_dir: Path, placement, method: str, scene_source: str, extra: dict) -> None:
-    """placement.json (markers + summary), placement.csv (one row per marker) and tags/ (one
-    print-ready SVG per marker)."""
-    records = placement_records(placement, method)
-    write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": records})
+def plan_instructions(scene, placement, disc, height: float, surfaces: Sequence | None = None) -> list[dict]:
+    """The ``install`` object of every placed marker (:mod:`markerplace.report.instructions`), in the
+    frame of ``scene`` (the internal frame: ``placement`` and ``disc`` too).
+
+    The floor under a tag is the plan's: a candidate's centre stands ``height`` (``--height``)
+    above the storey's floor map in front of its wall (furniture tops are not floor there), so
+    the floor is the tag's z minus ``height``; its storey is its candidate's.
+    """
+    from .instructions import install_instructions
+
+    t0 = time.perf_counter()
+    storeys = [int(disc.candidate_storey[int(c)]) for c in placement.candidates]
+    floors = [float(m.position[2]) - float(height) for m in placement.markers]
+    out = install_instructions(scene, placement.markers, storeys, [float(disc.storeys[s]) for s in storeys], floors,
+                               surfaces)
+    log.info("instructions: %d tags measured on the model (walls, corners, door edges) in %.1f s", len(out),
+             time.perf_counter() - t0)
+    return out
+
+
+def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, method: str, extra: dict) -> None:
+    """placement.json (markers + summary), placement.csv (the installer's checklist, one row per
+    marker: :data:`~markerplace.report.instructions.CHECKLIST_COLUMNS`) and tags/ (one print-ready
+    SVG per marker)."""
+    from .instructions import CHECKLIST_COLUMNS, checklist_row
+
+    write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": list(records)})
     buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(CSV_COLUMNS)
+    writer.writerow(CHECKLIST_COLUMNS)
     for r in records:
-        writer.writerow([r["order"], r["tag_id"], r["family"], r["size"], *r["position"], *r["normal"], r["yaw_deg"],
-                         "" if r["gain"] is None else f"{r['gain']:.6g}"])
+        writer.writerow(checklist_row(r))
     with atomic_path(out_dir / "placement.csv") as tmp:
         tmp.write_text(buf.getvalue())
     write_tag_sheets(out_dir / "tags", records)
 
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
-                       scene_source: str, existing: Sequence = (), world_offset=None, paper: str = "a4",
-                       scene_options: dict | None = None) -> dict:
+                       scene_source: str, scene, existing: Sequence = (), world_offset=None, paper: str = "a4",
+                       scene_options: dict | None = None, exclusion=None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
+
+    ``scene`` (internal frame) is measured for the installer's instructions (each marker's
+    ``install`` object, :func:`plan_instructions`), whose ``pages`` say where it is in tags.pdf.
 
     ``paper`` sets tags.pdf's paper (:mod:`markerplace.report.pdf`); ``scene_options`` (``up``,
     ``unit_scale``, ``seed`` of the scene argument) go into config.json with the existing markers,
     so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
-    (:mod:`markerplace.report.deliverables`).
+    (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
+    :class:`~markerplace.plan.exclusion.Exclusion`, user frame) goes there too.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
     :mod:`markerplace.scene.worldframe`; None = not shifted).
     """
     out_dir = Path(out_dir)
+    install = plan_instructions(scene, placement, data.disc, config.discretize.height,
+                                [r.get("surface") for r in placement_records(placement, method, data.disc)])
     if world_offset is not None and np.any(world_offset):
         from dataclasses import replace
 
@@ -100,16 +137,21 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "planned_storeys": [int(s) for s in disc.planned_storeys],
         "discretization": disc.summary,
     }
-    write_placement(out_dir, placement, method, scene_source, {"summary": summary})
+    records = placement_records(placement, method, disc)
+    for r, inst in zip(records, install):
+        r["install"] = install_to_frame(inst, world_offset)
+    for r, sh in zip(records, sheet_plan(records, paper)):  # where each tag is in tags.pdf
+        r["install"].update(pages=sh.pages, tiles=list(sh.tiles))
+    write_placement(out_dir, records, scene_source, method, {"summary": summary})
     from .deliverables import write_deliverables
 
-    write_deliverables(out_dir, placement_records(placement, method), placement.markers, existing, disc, scene_source,
-                       scene_options, paper)
+    write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
     write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config), "scene_options": scene_options or {},
-                                         "existing_markers": [m.to_json() for m in existing]})
+                                         "existing_markers": [m.to_json() for m in existing],
+                                         "exclude": None if exclusion is None else exclusion.to_json()})
 
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
     eye = disc.storeys[disc.planned_storeys] + config.discretize.height

@@ -4,9 +4,10 @@ Sections: the scene (storeys and floor heights, floor area, camera poses, candid
 what the discretization removed, from ``placement.json``'s summary), the localizability scores
 before and after, the top-down maps (``scores.png``, ``placement.png``, ``gain_first.png``: one
 panel per storey), a checklist, and every tag in placement order with its installer views
-(:mod:`markerplace.report.installer`) and a caption measured on the model
-(:mod:`markerplace.report.captions`: storey, wall and facing, height above the local floor,
-distance along the wall to the nearest corner or opening edge, tag id, printed size).
+(:mod:`markerplace.report.installer`) and its instructions, read from each marker's ``install``
+object in ``placement.json`` (:mod:`markerplace.report.instructions`: storey, wall and facing,
+height above the floor under it, distances along the wall to the nearest corner or door edge on
+each side, tag id, printed size, pages of tags.pdf).
 
 Positions shown are in the user's frame (the model file's coordinates, z up, metres); the
 directions follow the convention of :mod:`markerplace.report.captions` (+x east, +y north),
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .html import esc, img, jpeg_uri, png_file_uri, table, write_page
+from .review import REVIEW_SCRIPT, reject_button, review_box, surface_line
 
 log = logging.getLogger(__name__)
 
@@ -32,17 +34,15 @@ CONVENTION = ("Directions name the model's axes like a map seen from above: <b>+
               "(-x west, -y south; the model's +y, not magnetic north; up on the maps above). A tag "
               "<i>faces</i> the way its printed side looks (its wall normal, towards the room) and hangs "
               "<i>on</i> the wall on the opposite side: a tag that faces west is on the east wall. "
-              "Left and right are as seen standing in front of the tag, looking at it. Heights are of the "
-              "tag centre (the middle of the black square) above the floor in front of it; distances run "
-              "along the wall at that height from the tag centre to the nearest corner (the next wall or "
-              "something standing against it) or the edge of the surface the tag hangs on (a door, an opening, "
-              "an outside corner, the end of a cupboard the tag is on), measured with rays on the model; a "
-              "picture or panel on the wall does not end it. Coordinates are the model's, in metres, z up.")
-
-
-def _storey_of(z: float, storeys: np.ndarray, height: float) -> int:
-    """Index of the storey whose eye level (floor + ``height``) is nearest to ``z``."""
-    return int(np.argmin(np.abs(np.asarray(storeys) + height - z)))
+              "Left and right are as seen standing in front of the wall, facing it. Heights are of the "
+              "tag centre (the middle of the black square) above the floor at the foot of the wall under it "
+              "(where you stand, never a table or a shelf). Distances run along the wall plane from the "
+              "nearest reference on each side to the tag centre: a <i>corner</i> (the next wall), a <i>door "
+              "edge</i> (the edge of a doorway) or the <i>end of the wall</i> (an outside corner, the end of the "
+              "surface); furniture in front of the wall, a picture or a window do not end it, so a tape on the "
+              "wall at the tag's height and one along the floor line read the same. Measured with rays on the "
+              "model; coordinates are the model's, in metres, z up. placement.csv and placement.json "
+              "(<code>install</code>) hold the same instructions.")
 
 
 def _scene_section(doc: dict, num_markers: int) -> str:
@@ -64,8 +64,8 @@ def _scene_section(doc: dict, num_markers: int) -> str:
         ["storeys planned", ", ".join(str(v) for v in s.get("planned_storeys", []))],
         ["camera poses", f"{s.get('num_poses', 0)} ({s.get('num_locations', 0)} locations x {yaws} yaws)"],
         ["wall spots found", disc.get("wall_spots", "?")],
-        ["removed: on glass / tag does not fit flat / seen by no camera",
-         f"{removed.get('glass', 0)} / {removed.get('does not fit', 0)} / {removed.get('not seen', 0)}"],
+        ["removed (a spot counts once, under the first rule)",
+         _removed_words(removed, float((doc.get("markers") or [{}])[0].get("size", 0.4)))],
         ["candidate spots competing", s.get("num_candidates", "?")],
     ]
     unreached = [f"storey {p['storey']}: {u['area_m2']:.1f} m^2 around ({u['centre'][0]:.1f}, {u['centre'][1]:.1f})"
@@ -75,6 +75,16 @@ def _scene_section(doc: dict, num_markers: int) -> str:
     return ("<h2>Scene</h2>" + table(None, facts) +
             table(["storey", "floor (m)", "open floor (m^2)", "free (m^2)", "camera locations", "candidate spots",
                    "regions without cameras"], rows + total) + note)
+
+
+def _removed_words(removed: dict, size: float) -> str:
+    """What the candidate rules and the planner removed, e.g. ``"3 on glass, 2 on doors, ...,
+    1 seen by no camera"`` (:mod:`markerplace.plan.wall_candidates`; ``size``: the tag, metres)."""
+    from ..plan.wall_candidates import RULES, rule_words
+
+    words = [f"{removed[r]} {rule_words(r, size)}" for r in RULES if removed.get(r)]
+    words += [f"{removed['not seen']} seen by no camera"] if removed.get("not seen") else []
+    return ", ".join(words) or "none"
 
 
 def _scores_section(s: dict) -> str:
@@ -113,15 +123,17 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
         scene: the scene in its internal frame (rendered and ray cast).
         disc: the run's :class:`~markerplace.plan.discretization.Discretization` (internal
             frame): storeys and occupancy (where the installer camera may stand).
-        height: eye level above the local floor (``--height``), metres.
+        height: eye level above the local floor (``--height``), metres (unused: each marker's
+            ``install`` object carries its floor and height; kept for callers).
         world_offset: (3,) user-frame offset of the internal frame (``p_internal = p_user -
             offset``, :mod:`markerplace.scene.worldframe`); None = not shifted.
     """
     from ..markers import load_markers
     from ..scene.raycast import RayCaster
     from ..scene.worldframe import markers_to_internal
-    from .captions import describe_tag
     from .installer import render_installer_views
+    from .instructions import (along_words, height_words, install_to_frame, pages_words, place_from_install,
+                               storey_words, wall_words)
 
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
@@ -130,13 +142,12 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
     offset = np.zeros(3) if world_offset is None else np.asarray(world_offset, float)
     markers = markers_to_internal(load_markers(out_dir / "placement.json"), offset)
     caster = RayCaster(*scene.geometry())
-    storeys = np.asarray(disc.storeys, float)
     planned = [int(v) for v in disc.planned_storeys]
-    tag_storey = [_storey_of(float(m.position[2]), storeys, height) for m in markers]
-    places = [describe_tag(caster, m.position, m.normal, float(storeys[s])) for m, s in zip(markers, tag_storey)]
+    installs = [r["install"] for r in records]
+    places = [place_from_install(install_to_frame(i, -offset)) for i in installs]
 
     def occupancy_of(i: int):
-        s = tag_storey[i]
+        s = installs[i]["storey"]
         return disc.occupancy[planned.index(s)] if s in planned else None
 
     labels = [f"#{r['order']} id {r['tag_id']}" for r in records]
@@ -144,23 +155,28 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
                                    disc.grid_resolution, labels) if markers else []
 
     checklist, cards = [], []
-    for r, place, s, v in zip(records, places, tag_storey, views):
+    for r, inst, v in zip(records, installs, views):
         x, y, z = r["position"]
-        checklist.append([r["order"], r["tag_id"], f"{s} (floor {storeys[s]:.2f} m)", place.wall, place.facing,
-                          round(place.height, 2), place.distance_words()])
+        checklist.append([r["order"], r["tag_id"], storey_words(inst), wall_words(inst), round(inst["height_m"], 2),
+                          along_words(inst), pages_words(inst.get("pages", []))])
         sheet = f"tags/{r['order']:02d}_tag{r['tag_id']}.svg"
+        pages = inst.get("pages", [])
         items = [
-            f"Storey <b>{s}</b> (floor at {storeys[s]:.2f} m), on the <b>{esc(place.wall)} wall</b>: "
-            f"the tag faces <b>{esc(place.facing)}</b>.",
-            f"Centre <b>{place.height:.2f} m</b> above the floor in front of it.",
-            f"Centre <b>{esc(place.distance_words())}</b> (as you face the wall).",
+            f"<b>{esc(storey_words(inst).capitalize())}</b>; on the <b>{esc(wall_words(inst))}</b>.",
+            f"<b>{esc(height_words(inst).capitalize())}</b> (the middle of the black square; the floor at the foot "
+            "of the wall, where you stand, never furniture).",
+            f"Centre <b>{esc(along_words(inst))}</b> (as you face the wall, along the wall).",
             f"Tag {esc(r['family'])} id <b>{r['tag_id']}</b>, black square <b>{1000 * r['size']:.0f} mm</b>; "
-            f"print sheet <code>{esc(sheet)}</code>; hang it caption side down.",
+            f"print sheet <code>{esc(sheet)}</code>"
+            + (f" or page(s) {pages_words(pages)} of <code>tags.pdf</code>" if pages else "")
+            + "; hang it with the caption (\"this edge down\") at the bottom.",
             f"Model coordinates of the centre: ({x:.2f}, {y:.2f}, {z:.2f}) m.",
         ]
+        on = surface_line(r)  # what the tag is on (report/review.py)
+        items = items[:1] + ([on] if on else []) + items[1:]
         cards.append(
             f'<div class="tag" id="tag{r["order"]}"><h3>#{r["order"]}: tag id {r["tag_id"]}</h3>'
-            f'<ul class="caption">{"".join(f"<li>{t}</li>" for t in items)}</ul><div class="views">'
+            f'<ul class="caption">{"".join(f"<li>{t}</li>" for t in items)}</ul>{reject_button(r)}<div class="views">'
             + img(jpeg_uri(v.close), f"tag {r['order']} close view",
                   f"Standing {v.close_distance:.1f} m in front of the spot at eye level; the tag is outlined.")
             + img(jpeg_uri(v.wide), f"tag {r['order']} wide view",
@@ -174,8 +190,9 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
             f"{_order_note(doc.get('method'))}. Generated by markerplace from <code>placement.json</code>.</p>",
             _scene_section(doc, len(records)), _scores_section(doc["summary"]), _maps_section(out_dir),
             "<h2>Tags</h2>", f"<p class=\"note\">{CONVENTION}</p>",
-            table(["#", "tag id", "storey", "wall", "faces", "centre height (m)", "along the wall"], checklist),
-            *cards]
+            table(["#", "tag id", "storey", "wall", "centre above the floor (m)", "along the wall, to the centre",
+                   "tags.pdf pages"], checklist),
+            review_box(str(doc.get("scene", "?")), str(out_dir)), *cards, REVIEW_SCRIPT]
     path = write_page(out_dir / "report.html", title, "\n".join(body))
     log.info("report.html: %d tags, %.1f s", len(records), time.perf_counter() - t0)
     return path

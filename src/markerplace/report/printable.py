@@ -2,9 +2,10 @@
 
 Each file is a vector drawing (millimetre units, so any printer or print shop reproduces the
 size exactly) of the tag36h11 pattern with its white quiet zone (:func:`markerplace.render.tags.
-outer_size`), and below it a caption strip: placement order, tag id, black-square size,
-position and facing direction. The caption is outside the quiet zone, so it never touches the
-pattern, and it marks the tag's bottom edge: hang the sheet caption-side down.
+outer_size`), and below it a caption strip: placement order, tag id, black-square size, where
+it hangs (storey, wall, height, distance along the wall) and "this edge down". The caption is
+outside the quiet zone, so it never touches the pattern, and it marks the tag's bottom edge:
+hang the sheet caption-side down.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 
 from ..io_utils import atomic_path
 from ..render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
+from ..runtime import run_folder
 
 
 def tag_modules(tag_id: int) -> np.ndarray:
@@ -75,28 +77,27 @@ def tag_svg(tag_id: int, size_m: float, caption: Sequence[str]) -> str:
 
 
 def caption_for(record: dict) -> list[str]:
-    """Caption lines of a ``placement.json`` marker record."""
-    x, y, z = record["position"]
-    return [f"#{record['order']}  {record['family']} id {record['tag_id']}  "
-            f"black square {1000 * record['size']:.0f} mm",
-            f"tag centre ({x:.2f}, {y:.2f}, {z:.2f}) m, facing {record['yaw_deg']:.0f} deg",
-            "this side down"]
+    """Caption lines of a ``placement.json`` marker record: order, id and size; where it hangs
+    (from its ``install`` object: storey, wall, height above the floor, distance to the nearer
+    corner or door edge); "this edge down" (:func:`markerplace.report.instructions.caption_lines`)."""
+    from .instructions import caption_lines
+
+    return caption_lines(record)
 
 
 def write_tag_sheets(folder: str | Path, records: Sequence[dict]) -> list[Path]:
     """Write ``NN_tag<id>.svg`` for each marker record (see :func:`caption_for`), atomically;
-    SVGs of an earlier plan in ``folder`` that are not part of this one are removed.
+    SVGs an earlier plan wrote in ``folder`` that are not part of this one are removed (other
+    files are left alone: :func:`markerplace.runtime.run_folder.remove_stale`).
 
     Returns the written paths in placement order.
     """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for rec in records:
         path = folder / f"{rec['order']:02d}_tag{rec['tag_id']}.svg"
         with atomic_path(path) as tmp:
             tmp.write_text(tag_svg(rec["tag_id"], rec["size"], caption_for(rec)))
         paths.append(path)
-    for old in set(folder.glob("*.svg")) - set(paths):
-        old.unlink()
+    run_folder.remove_stale(folder, paths, "*.svg")
     return paths

@@ -7,6 +7,10 @@ reused: same key, and the bytes on disk still match the stored size and checksum
 :func:`mark_done` records both after a successful (atomic) write. :func:`load_fresh` also
 recovers from an artifact that verifies but cannot be read.
 
+Keys are built from content: a stage's key holds the :func:`content_digest` of the artifacts it
+was computed from (the checksum their meta files record), so an upstream artifact recomputed or
+repaired with other bytes invalidates everything downstream of it.
+
 A stage interrupted half-way leaves no meta file, so it is simply recomputed next time. A
 damaged artifact (truncated by a full disk, a crash while copying the folder, edited by hand)
 or one that fails to load is recomputed with a warning naming the file; a meta file without a
@@ -155,7 +159,7 @@ def is_fresh(artifact: str | Path, key: str) -> bool:
         return False
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         log.warning("cache: %s is unreadable; recomputing %s", meta_path, artifact)
         return False
     if not isinstance(meta, dict) or meta.get("key") != key:
@@ -183,6 +187,28 @@ def load_fresh(artifact: str | Path, key: str, loader: Callable[[Path], T]) -> T
         reason = " ".join(str(err).split())[:160] or err.__class__.__name__
         log.warning("cache: could not read %s (%s: %s); recomputing it", artifact, err.__class__.__name__, reason)
         return None
+
+
+def content_digest(artifact: str | Path) -> str:
+    """Hash (hex, 16 chars) of an artifact's bytes, for the keys of the stages computed from it:
+    from the checksum its ``.meta.json`` records (which :func:`is_fresh` has verified or
+    :func:`mark_done` has just written), else computed from the bytes."""
+    artifact = Path(artifact)
+    try:
+        meta = json.loads(_meta_path(artifact).read_text())
+        stored = {k: meta[k] for k in ("size", "sha256", "files") if k in meta}
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, RecursionError):
+        stored = {}
+    return hash_of(stored or artifact_checksum(artifact))
+
+
+def recorded_upstream(artifact: str | Path) -> dict:
+    """The ``upstream`` digests ``artifact``'s meta file records ({} when none)."""
+    try:
+        up = json.loads(_meta_path(Path(artifact)).read_text()).get("upstream", {})
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError, RecursionError):
+        return {}
+    return up if isinstance(up, dict) else {}
 
 
 def mark_done(artifact: str | Path, key: str, **info: Any) -> None:

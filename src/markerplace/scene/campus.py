@@ -376,9 +376,12 @@ def build_campus(seed: int = 0) -> Scene:
     for storey in plan.storeys:
         add_layout(mb, storey, pal, seed)
     stair_wall = wall_material(mb, STAIR_WALL)
-    _add_stair(mb, pal, stair_wall)
-    _add_slab(mb, pal, stair_wall)
-    _add_balustrade(mb, pal)
+    with mb.labelled("stair"):
+        _add_stair(mb, pal, stair_wall)
+    with mb.labelled("wall"):  # the slab's edges continue the walls
+        _add_slab(mb, pal, stair_wall)
+    with mb.labelled("balustrade"):
+        _add_balustrade(mb, pal)
     parts = mb.parts()
     meta = {
         "storeys": [float(s.floor_z) for s in plan.storeys],

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 
 from ..errors import UserError
-from .layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .layout import Building, Door, Item, Layout, Opening, Picture, RoomSpec, chairs_around, wall_item, workstation
 from .campus import build_campus, campus_plan
 from .house import build_house, house_plan
 from .procedural import build_scene
@@ -42,7 +42,6 @@ def _room() -> Layout:
         Item("coffee_table", 2.0, 1.9),
         wall_item("tv_stand", size, "N", 2.0),
         wall_item("bookshelf", size, "E", 1.0),
-        wall_item("bookshelf", size, "E", 1.95),
         wall_item("plant", size, "E", 3.5),
         *workstation(0.45, 3.1, 90.0),
     )
@@ -52,10 +51,10 @@ def _room() -> Layout:
         floor="wood",
         wall_color=(234, 230, 220),
         items=items,
-        pictures=(Picture("W", 1.3, 0.9, "chelsea"), Picture("N", 4.1, 0.6, "art:1")),
+        pictures=(Picture("W", 1.3, 0.9, "chelsea"), Picture("N", 2.0, 0.6, "art:1", z_center=1.7)),
         lights=2,
     )
-    return Layout("room", "a single living room (21 m^2): sofa, TV, bookshelves, a desk, two pictures", (room,))
+    return Layout("room", "a single living room (21 m^2): sofa, TV, a bookshelf, a desk, two pictures", (room,))
 
 
 def _office() -> Layout:
@@ -227,6 +226,7 @@ def _apartment() -> Layout:
             wall_item("plant", living_size, "S", 7.3),
         ),
         pictures=(Picture("S", 3.5, 1.2, "art:5"), Picture("W", 5.3, 0.8, "chelsea")),
+        openings=(Opening("S", 1.5, 1.2, "window"), Opening("S", 5.8, 0.9, "glass_door", sill=0.0)),
         lights=4,
     )
     kitchen_size = (4.0, 6.5)
@@ -255,6 +255,7 @@ def _apartment() -> Layout:
             Picture("N", 1.8, 0.9, "camera"),
             Picture("N", 9.25, 0.8, "rocket"),
         ),
+        openings=(Opening("W", 1.0, 0.9, "door", sill=0.0),),  # the front door
         lights=4,
     )
     master_size = (6.0, 6.5)
@@ -273,6 +274,7 @@ def _apartment() -> Layout:
             wall_item("plant", master_size, "W", 0.8),
         ),
         pictures=(Picture("N", 3.0, 1.0, "art:6", z_center=1.7), Picture("W", 3.5, 0.8, "ihc")),
+        openings=(Opening("W", 5.3, 1.2, "window"),),
         lights=2,
     )
     bath = RoomSpec(
@@ -323,13 +325,15 @@ def _apartment() -> Layout:
             wall_item("plant", dining_size, "E", 1.2),
         ),
         pictures=(Picture("W", 4.0, 0.8, "coffee"),),
+        openings=(Opening("E", 4.0, 1.2, "window"),),
         lights=2,
     )
     bed_a = _twin_bedroom("bedroom_a", (12.0, 0.0, 16.0, 6.5))
     bed_b = _twin_bedroom("bedroom_b", (16.0, 0.0, 20.0, 6.5))
     return Layout(
         "apartment",
-        "an apartment (300 m^2): corridor and 9 rooms, including two identical bedrooms (perceptual aliasing)",
+        "an apartment (300 m^2): corridor and 9 rooms, including two identical bedrooms (perceptual aliasing); "
+        "windows, a glass door and a front door",
         (living, kitchen, bed_a, bed_b, corridor, master, bath, study, bath2, dining),
         doors=(
             Door("living", "corridor", at=0.8),

@@ -6,7 +6,9 @@ about z; its front then faces (sin yaw, -cos yaw): 0 faces -y (stands against a 
 faces +y, 90 faces +x (against a west wall), -90 faces -x (against an east wall).
 
 Each builder ``fn(mb, pal, T, rng, variant)`` adds boxes to a :class:`~.meshkit.MeshBuilder`
-with the palette ``pal`` (:func:`palette`) placed by ``T = (yaw radians, (3,) translation)``.
+with the palette ``pal`` (:func:`palette`) placed by ``T = (yaw radians, (3,) translation)``; the
+caller labels them with the item's kind (a builder may label pieces more precisely: a
+``tv_stand`` is a ``sideboard`` with a ``tv`` on it).
 :data:`FURNITURE` maps a kind to (builder, footprint width, depth, height).
 """
 
@@ -116,9 +118,11 @@ def _fridge(mb, pal, T, rng, v):
 
 
 def _tv_stand(mb, pal, T, rng, v):
-    add_box(mb, (-0.8, -0.2, 0), (0.8, 0.2, 0.5), {"-y": pal["drawers"], "*": pal["wood"]}, T)
-    add_box(mb, (-0.6, -0.03, 0.55), (0.6, 0.03, 1.25), {"-y": pal["tv"], "*": pal["plastic_dark"]}, T, skip=())
-    add_box(mb, (-0.15, -0.1, 0.5), (0.15, 0.1, 0.55), pal["plastic_dark"], T)
+    with mb.labelled("sideboard"):
+        add_box(mb, (-0.8, -0.2, 0), (0.8, 0.2, 0.5), {"-y": pal["drawers"], "*": pal["wood"]}, T)
+    with mb.labelled("tv"):
+        add_box(mb, (-0.6, -0.03, 0.55), (0.6, 0.03, 1.25), {"-y": pal["tv"], "*": pal["plastic_dark"]}, T, skip=())
+        add_box(mb, (-0.15, -0.1, 0.5), (0.15, 0.1, 0.55), pal["plastic_dark"], T)
 
 
 def _plant(mb, pal, T, rng, v):
@@ -218,6 +222,7 @@ def texture_fns() -> dict:
         "wardrobe_front": (tx.floor_tiles, (128, 2, (215, 210, 200), (90, 85, 80))),
         "kitchen_front": (tx.floor_tiles, (256, 4, (200, 205, 210), (70, 70, 75))),
         "fridge_front": (tx.floor_tiles, (64, 1, (225, 228, 230), (140, 140, 145))),
+        "door_leaf": (tx.floor_tiles, (128, 2, (190, 150, 110), (120, 85, 55))),  # a four-panel door
     }
 
 
@@ -259,6 +264,7 @@ def palette() -> dict[str, Material]:
         "glass": M("glass", None, (0.78, 0.88, 0.92, 76 / 255), transparent=True),
         "glass_frame": M("glass_frame", None, (0.22, 0.23, 0.25, 1.0)),
         "concrete": M("concrete", None, (0.72, 0.71, 0.68, 1.0)),
+        "door": M("door", "door_leaf", repeat=None),
     }
 
 

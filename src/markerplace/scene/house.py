@@ -1,4 +1,5 @@
-"""The built-in ``house``: a two-storey house with a stair, a sunken living room and a glass wall.
+"""The built-in ``house``: a two-storey house with a stair, a sunken living room, a glass wall,
+windows, a glass door and a front door.
 
 World frame: z up, metres, ground floor at z = 0; footprint x in [0, 10.5], y in [0, 7.5] (wall
 centre lines), 78.75 m^2 per storey, 157.5 m^2 in all. Storey height 3.0 m: ceilings 2.7 m above
@@ -28,8 +29,12 @@ risers close the volume against the walls and the floor). The slab has an openin
 stair, with slab edge faces; the ground stair room's ceiling and the landing's floor have the
 same hole.
 
-Everything else (walls, floors, ceilings, lights, furniture, pictures) comes from
-:func:`markerplace.scene.procedural.add_layout`, one :class:`Layout` per storey.
+Windows (:class:`~.layout.Opening`, sill 0.9 m, top 2.1 m): kitchen north above the counter
+(sill 1.05 m), master bedroom south, study north. A glass door from the sunroom (south wall) and
+an opaque front door in the hall's east wall, both 0.9 m wide and 2.1 m high.
+
+Everything else (walls, floors, ceilings, lights, furniture, pictures, windows and doors) comes
+from :func:`markerplace.scene.procedural.add_layout`, one :class:`Layout` per storey.
 
 ``Scene.meta`` keys (world metres; x/y spans are [min, max]):
 
@@ -38,8 +43,9 @@ Everything else (walls, floors, ceilings, lights, furniture, pictures) comes fro
 * ``sunken_room``: name of the sunken room (``"living"``); ``sunken_floor_z`` (-0.25);
   ``sunken_opening``: the open side towards it, ``{"rooms", "orient", "line", "span",
   "step_height"}`` (``orient`` ``"h"``: a wall along x at y = ``line``; ``span``: its x extent).
-* ``glass_parts``: names of the transparent parts; ``glass_wall``: ``{"rooms", "orient",
-  "line", "span", "z"}`` of the glazed opening (``z``: bottom and top of the glass).
+* ``glass_parts``: names of the transparent parts (the glass wall's, the windows' and the glass
+  door's); ``glass_wall``: ``{"rooms", "orient", "line", "span", "z", "parts"}`` of the glazed
+  opening (``z``: bottom and top of the glass; ``parts``: its transparent parts).
 * ``narrow_door_room``: the room reached only through a narrow doorway (``"bathroom"``);
   ``narrow_door``: ``{"rooms", "orient", "line", "span", "width", "floor_z", "height"}``.
 * ``stair``: ``{"x", "y", "bottom_z", "top_z", "risers", "rise", "going", "up"}`` (``up``: the
@@ -56,7 +62,7 @@ import numpy as np
 
 from . import textures as tx
 from .furniture import palette, texture_fns
-from .layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from .layout import Building, Door, Item, Layout, Opening, Picture, RoomSpec, chairs_around, wall_item, workstation
 from .meshkit import Material, MeshBuilder, add_box
 from .procedural import add_layout, layout_rooms, wall_material
 from .types import Scene
@@ -118,6 +124,7 @@ def _ground() -> Layout:
             *chairs_around(1.1, 2.3, 0.45, (-0.4, 0.4)),
         ),
         pictures=(Picture("W", 1.0, 0.6, "coffee"),),
+        openings=(Opening("N", 3.4, 1.2, "window", sill=1.05),),  # above the counter
         lights=2,
     )
     sun = (4.5, 4.0)
@@ -135,6 +142,7 @@ def _ground() -> Layout:
             Item("plant", 4.05, 3.55),
         ),
         pictures=(Picture("S", 2.25, 1.0, "astronaut"), Picture("E", 2.0, 0.8, "art:2", z_center=1.7)),
+        openings=(Opening("S", 0.9, 0.9, "glass_door", sill=0.0),),  # to the garden
         lights=2,
     )
     hall = RoomSpec(
@@ -142,8 +150,9 @@ def _ground() -> Layout:
         (6.0, 4.0, 10.5, 6.35),
         floor="wood_dark",
         wall_color=(240, 240, 236),
-        items=(wall_item("cabinet", (4.5, 2.35), "N", 1.5), Item("plant", 4.1, 1.0)),
-        pictures=(Picture("N", 2.6, 0.8, "hubble"), Picture("E", 1.2, 0.7, "moon")),
+        items=(wall_item("cabinet", (4.5, 2.35), "N", 1.5), Item("plant", 4.05, 0.45)),
+        pictures=(Picture("N", 2.6, 0.8, "hubble"),),
+        openings=(Opening("E", 1.6, 0.9, "door", sill=0.0),),  # the front door
         lights=1,
     )
     stairs = RoomSpec(
@@ -188,6 +197,7 @@ def _upper() -> Layout:
             Item("rug", 2.9, 2.25, 90.0),
         ),
         pictures=(Picture("W", 2.25, 1.0, "art:6", z_center=1.7), Picture("N", 1.5, 0.8, "ihc")),
+        openings=(Opening("S", 1.4, 1.2, "window"),),
         lights=2,
     )
     bed_size = (3.0, 4.5)
@@ -223,6 +233,7 @@ def _upper() -> Layout:
         wall_color=(230, 232, 236),
         items=(*workstation(1.0, 2.58, 0.0), *workstation(2.45, 2.58, 0.0), wall_item("bookshelf", study_size, "W", 1.0)),
         pictures=(Picture("W", 2.3, 0.6, "retina"),),
+        openings=(Opening("N", 1.75, 1.2, "window"),),  # above the desks
         lights=1,
     )
     land_size = (7.0, 3.0)
@@ -256,7 +267,7 @@ def house_plan() -> Building:
     return Building(
         "house",
         "a two-storey house (158 m^2): stair, sunken living room, glass wall to a sunroom, "
-        "bathroom behind a 0.7 m doorway",
+        "bathroom behind a 0.7 m doorway, windows, a glass door and a front door",
         (_ground(), _upper()),
         slab_thickness=SLAB,
     )
@@ -349,11 +360,15 @@ def build_house(seed: int = 0) -> Scene:
     for storey in plan.storeys:
         add_layout(mb, storey, pal, seed)
     stairs = next(r for r in ground.rooms if r.name == "stairs")
-    _add_stair(mb, pal)
-    _add_slab(mb, pal, wall_material(mb, stairs.wall_color), (0.0, 0.0, 10.5, 7.5))
-    _add_balustrade(mb, pal)
+    with mb.labelled("stair"):
+        _add_stair(mb, pal)
+    with mb.labelled("wall"):  # the slab's edges continue the walls
+        _add_slab(mb, pal, wall_material(mb, stairs.wall_color), (0.0, 0.0, 10.5, 7.5))
+    with mb.labelled("balustrade"):
+        _add_balustrade(mb, pal)
     _, (g_or, g_line, g0, g1) = _opening(ground, "living", "sunroom")
-    _add_glazing(mb, pal, g_or, g_line, g0, g1, ground.floor_z, ground.floor_z + CEILING_HEIGHT)
+    with mb.labelled("glazing"):
+        _add_glazing(mb, pal, g_or, g_line, g0, g1, ground.floor_z, ground.floor_z + CEILING_HEIGHT)
     parts = mb.parts()
 
     _, (s_or, s_line, s0, s1) = _opening(ground, "kitchen", "living")
@@ -368,7 +383,8 @@ def build_house(seed: int = 0) -> Scene:
         "sunken_opening": {"rooms": ["kitchen", "living"], "orient": s_or, "line": s_line, "span": [s0, s1], "step_height": SUNKEN},
         "glass_parts": [p.name for p in parts if p.transparent],
         "glass_wall": {"rooms": ["living", "sunroom"], "orient": g_or, "line": g_line, "span": [g0, g1],
-                       "z": [round(ground.floor_z + FRAME, 6), round(ground.floor_z + CEILING_HEIGHT - FRAME, 6)]},
+                       "z": [round(ground.floor_z + FRAME, 6), round(ground.floor_z + CEILING_HEIGHT - FRAME, 6)],
+                       "parts": [p.name for p in parts if p.transparent and "glazing" in p.names]},
         "narrow_door_room": "bathroom",
         "narrow_door": {"rooms": ["bathroom", "landing"], "orient": n_or, "line": n_line, "span": [n0, n1],
                         "width": narrow.width, "floor_z": upper.floor_z, "height": narrow.height},

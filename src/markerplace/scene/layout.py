@@ -4,6 +4,8 @@ World frame: z up, metres. Room bounds are wall centre lines; furniture and pict
 room-local coordinates (metres from the room's (xmin, ymin) corner). A :class:`Layout` is one
 interior or one storey of a building (its ``floor_z``); :mod:`.procedural` turns it into meshes.
 A :class:`Building` is a multi-storey built-in: one layout per storey (:mod:`.house`, :mod:`.campus`).
+Windows and doors with a leaf are :class:`Opening` of one room's wall (usually an outside wall);
+a :class:`Door` is an open doorway between two rooms.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import numpy as np
 
 from .furniture import FURNITURE
 
-__all__ = ["Building", "Door", "Item", "Layout", "Picture", "RoomSpec", "chairs_around", "wall_item", "workstation"]
+__all__ = ["Building", "Door", "Item", "Layout", "Opening", "OPENING_KINDS", "Picture", "RoomSpec", "chairs_around",
+           "wall_item", "workstation"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,37 @@ class Picture:
     z_center: float = 1.5
 
 
+OPENING_KINDS = ("window", "door", "glass_door")
+"""Kinds of :class:`Opening`: a glazed window, an opaque door leaf, a glazed door."""
+
+
+@dataclass(frozen=True)
+class Opening:
+    """A window or a door (with its leaf, closed) set into one of a room's walls.
+
+    Built by :func:`markerplace.scene.walls.build_openings`: the wall gets a hole from ``sill``
+    to ``top`` above the room's floor; a ``window`` fills it with a frame and a glass pane, a
+    ``glass_door`` likewise down to the floor, a ``door`` with an opaque leaf set into the middle
+    of the wall's thickness (its faces 3 cm behind the wall's). Meant for outside walls: a closed
+    door between two rooms would cut them apart (use :class:`Door` for a doorway).
+
+    Attributes:
+        wall: ``"N"``, ``"S"``, ``"E"`` or ``"W"`` (as :class:`Picture`).
+        along: room-local coordinate of its centre along the wall (x for N/S, y for E/W), metres.
+        width: clear width, metres.
+        kind: one of :data:`OPENING_KINDS`.
+        sill: bottom of the opening above the room's floor, metres (doors: 0).
+        top: top of the opening above the room's floor, metres.
+    """
+
+    wall: str
+    along: float
+    width: float
+    kind: str = "window"
+    sill: float = 0.9
+    top: float = 2.1
+
+
 @dataclass(frozen=True)
 class RoomSpec:
     """A room: footprint (xmin, ymin, xmax, ymax) on wall centre lines, floor and wall finish.
@@ -64,6 +98,7 @@ class RoomSpec:
             an opening between floors of different heights gets a step (see :class:`Door`).
         floor_holes / ceiling_holes: world (xmin, ymin, xmax, ymax) rectangles cut out of the
             room's floor / ceiling quad (a stairwell); they must lie inside the room's bounds.
+        openings: windows and doors in the room's walls (:class:`Opening`).
     """
 
     name: str
@@ -77,6 +112,7 @@ class RoomSpec:
     floor_dz: float = 0.0
     floor_holes: tuple[tuple[float, float, float, float], ...] = ()
     ceiling_holes: tuple[tuple[float, float, float, float], ...] = ()
+    openings: tuple[Opening, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,12 @@ convention (v grows upwards), per-vertex RGBA colours, and the base colour (glTF
 ``baseColorFactor`` / MTL ``Kd``). Identical texture images are shared between parts. Glass
 (glTF ``alphaMode`` BLEND with alpha < 0.9 or ``KHR_materials_transmission``; MTL ``d`` < 0.9 or
 ``Tr`` > 0.1) becomes ``MeshPart.transparent`` (:mod:`.transparency`).
+
+Names are kept in ``MeshPart.names`` for :func:`markerplace.scene.semantics.classify` (tags stay
+off windows, doors, furniture, ...): for glTF the node, its parent nodes (a ``Window_3`` group
+holding a ``Cube.012`` mesh), the mesh and the material; for OBJ the material (trimesh groups
+OBJ faces by material, so ``o``/``g`` names are not kept); never the file's own name (a
+``window_scan.ply`` is not a window).
 """
 
 from __future__ import annotations
@@ -156,7 +162,8 @@ def _resolver(path: Path):
 
 
 def _read_instances(path: Path, ext: str) -> list[tuple]:
-    """Every triangle-mesh instance of the file's scene graph: (name, trimesh.Trimesh, (4, 4) file_from_mesh)."""
+    """Every triangle-mesh instance of the file's scene graph: (name, trimesh.Trimesh, (4, 4)
+    file_from_mesh, names): ``names`` as :attr:`MeshPart.names` (see the module docstring)."""
     import io
 
     import trimesh
@@ -172,12 +179,22 @@ def _read_instances(path: Path, ext: str) -> list[tuple]:
             loaded = trimesh.load(str(path), file_type=ext[1:], resolver=resolver, force="scene", process=False)
         if not isinstance(loaded, trimesh.Scene):
             loaded = trimesh.Scene(loaded)
+        parents = loaded.graph.transforms.parents
+        base = loaded.graph.base_frame
+        own = {path.name, path.stem}
         out = []
         for node in loaded.graph.nodes_geometry:
             transform, geom_name = loaded.graph[node]
             mesh = loaded.geometry[geom_name]
             if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) > 0:
-                out.append((str(geom_name), mesh, np.asarray(transform, dtype=np.float64)))
+                chain, at = [], node
+                while at is not None and at != base and len(chain) < 32:
+                    chain.append(str(at))
+                    at = parents.get(at)
+                material = getattr(getattr(mesh.visual, "material", None), "name", None)
+                names = [n for n in (*chain, str(geom_name), material) if n and str(n) not in own]
+                out.append((str(geom_name), mesh, np.asarray(transform, dtype=np.float64),
+                            tuple(dict.fromkeys(str(n) for n in names))))
     except Exception as err:  # trimesh raises many kinds of errors on corrupt input
         if resolver.outside:
             raise UserError(f"could not read {path}: it needs {', '.join(resolver.outside[:3])}, outside the model's "
@@ -194,7 +211,7 @@ def _read_instances(path: Path, ext: str) -> list[tuple]:
 def _world_bounds(instances: list[tuple], world_from_file: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(3,) min and max corners in metres of all instances' bounding boxes in the world frame."""
     corners = []
-    for _, mesh, file_from_mesh in instances:
+    for _, mesh, file_from_mesh, *_ in instances:
         (x0, y0, z0), (x1, y1, z1) = np.asarray(mesh.bounds, dtype=float)
         box = np.array([[x, y, z, 1.0] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)])
         corners.append(box @ (world_from_file @ file_from_mesh).T)
@@ -211,7 +228,7 @@ def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str, gl
     parts: list[MeshPart] = []
     textures: dict[str, np.ndarray] = {}
     untextured = 0
-    for i, (geom_name, mesh, file_from_mesh) in enumerate(instances):
+    for i, (geom_name, mesh, file_from_mesh, names) in enumerate(instances):
         world_from_mesh = world_from_file @ file_from_mesh
         A, t = world_from_mesh[:3, :3], world_from_mesh[:3, 3]
         vertices = np.asarray(mesh.vertices, dtype=np.float64) @ A.T + t
@@ -241,6 +258,7 @@ def _to_parts(instances: list[tuple], world_from_file: np.ndarray, stem: str, gl
                 base_color=tuple(float(c) for c in (base if base is not None else (1.0, 1.0, 1.0, 1.0))),
                 normals=None if normals is None else normals.astype(np.float32),
                 transparent=transparent,
+                names=names,
             )
         )
     if untextured:

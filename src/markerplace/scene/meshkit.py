@@ -1,13 +1,17 @@
 """Mesh accumulation for procedural scenes: materials, textured quads and axis-aligned boxes.
 
-World frame: z up, metres. :class:`MeshBuilder` collects quads per :class:`Material` and emits one
-:class:`~markerplace.scene.types.MeshPart` per material, so a whole scene is a few dozen parts and
-repeated items share one texture array. :func:`add_box` adds a box (optionally yawed and
-translated) with one material per face.
+World frame: z up, metres. :class:`MeshBuilder` collects quads per label and :class:`Material`
+and emits one :class:`~markerplace.scene.types.MeshPart` per (label, material), so a whole scene
+is a few dozen to a few hundred parts and repeated items share one texture array. The label says
+truthfully what the quads are (``"wall"``, ``"door"``, ``"bookshelf"``: :meth:`MeshBuilder.labelled`);
+it becomes the part's name (``"<scene>/<label>/<material>"``) and ``names`` (read by
+:func:`markerplace.scene.semantics.classify`, which keeps tags off doors, windows, furniture, ...).
+:func:`add_box` adds a box (optionally yawed and translated) with one material per face.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,18 +36,32 @@ class Material:
 
 
 class MeshBuilder:
-    """Accumulates quads per material and emits one :class:`MeshPart` per material."""
+    """Accumulates quads per (label, material) and emits one :class:`MeshPart` per pair.
+
+    ``label`` (set with :meth:`labelled`) names what the quads added now belong to; ``""`` (the
+    default) leaves them unlabelled.
+    """
 
     def __init__(self, scene_name: str, bank: tx.TextureBank, texture_fns: dict):
         self.scene_name = scene_name
         self.bank = bank
         self.texture_fns = texture_fns
-        self._data: dict[str, dict] = {}
+        self.label = ""
+        self._data: dict[tuple[str, str], dict] = {}
         self._mats: dict[str, Material] = {}
+
+    @contextmanager
+    def labelled(self, label: str):
+        """Within the ``with`` block, quads belong to ``label`` (e.g. ``"bookshelf"``)."""
+        before, self.label = self.label, str(label)
+        try:
+            yield self
+        finally:
+            self.label = before
 
     def quad(self, mat: Material, corners: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> None:
         """Add a quad: (4, 3) corners counter-clockwise seen from the ``normal`` side, (4, 2) uv."""
-        d = self._data.setdefault(mat.key, {"v": [], "uv": [], "n": []})
+        d = self._data.setdefault((self.label, mat.key), {"v": [], "uv": [], "n": []})
         self._mats[mat.key] = mat
         d["v"].append(np.asarray(corners, dtype=np.float64))
         d["uv"].append(np.asarray(uv, dtype=np.float64))
@@ -51,7 +69,7 @@ class MeshBuilder:
 
     def parts(self) -> list[MeshPart]:
         out = []
-        for key, d in self._data.items():
+        for (label, key), d in self._data.items():
             mat = self._mats[key]
             v = np.concatenate(d["v"]).astype(np.float32)
             n_quads = len(d["v"])
@@ -69,7 +87,7 @@ class MeshBuilder:
                     arr.flags.writeable = False
             out.append(
                 MeshPart(
-                    name=f"{self.scene_name}/{key}",
+                    name=f"{self.scene_name}/{label}/{key}" if label else f"{self.scene_name}/{key}",
                     vertices=v,
                     faces=faces,
                     uv=uv,
@@ -77,6 +95,7 @@ class MeshBuilder:
                     base_color=tuple(float(c) for c in mat.color),
                     normals=normals,
                     transparent=mat.transparent,
+                    names=(label,) if label else (),
                 )
             )
         return out

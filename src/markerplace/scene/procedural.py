@@ -6,9 +6,12 @@ axis-aligned room rectangles whose edges are wall centre lines, doors between pa
 and per-room furniture and pictures in room-local coordinates (metres from the room's
 (xmin, ymin) corner), so two rooms with the same contents are identical up to a translation.
 
-Geometry is made of boxes and quads only (:mod:`.meshkit`). Parts are grouped by material
-(texture + colour), so a whole scene is a few dozen :class:`MeshPart` and repeated items share one
-texture array. Walls, door openings and steps are built by :mod:`.walls`; furniture builders,
+Geometry is made of boxes and quads only (:mod:`.meshkit`). Parts are grouped by label and
+material (texture + colour), so a whole scene is a few dozen to a few hundred :class:`MeshPart`
+and repeated items share one texture array. Labels say what each part is, truthfully: ``wall``,
+``floor``, ``ceiling``, ``light``, ``step``, ``window``, ``door``, ``picture``, ``whiteboard``
+and each furniture item's kind (``bookshelf``, ``wardrobe``, ``tv``, ...); they become
+``MeshPart.names`` (:mod:`.semantics` keeps tags off all but walls). Walls, door openings and steps are built by :mod:`.walls`; furniture builders,
 their local frame and the palette live in :mod:`.furniture`; the layout dataclasses in
 :mod:`.layout`. Here: floors, ceilings, lights, furniture and pictures of each room, layout
 validation and assembly. Rooms may sit lower than their storey (``floor_dz``, a sunken room:
@@ -25,10 +28,10 @@ import numpy as np
 
 from . import textures as tx
 from .furniture import FLOORS, FURNITURE, MAX_FREE_HEIGHT, TALL_AGAINST_WALL, palette, texture_fns
-from .layout import Layout, RoomSpec
+from .layout import OPENING_KINDS, Layout, RoomSpec
 from .meshkit import Material, MeshBuilder, add_box
 from .types import Room, Scene
-from .walls import build_walls, door_gaps, round_line
+from .walls import build_openings, build_walls, door_gaps, opening_spans, round_line
 
 __all__ = ["add_layout", "build_scene", "layout_rooms", "subtract_rects", "validate_layout", "wall_material"]
 
@@ -76,11 +79,13 @@ def _build_room_shell(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict
     for a0, b0, a1, b1 in subtract_rects(room.bounds, room.floor_holes):
         c_floor = np.array([[a0, b0, zf], [a1, b0, zf], [a1, b1, zf], [a0, b1, zf]], dtype=float)
         uv = np.array([[a0 - x0, b0 - y0], [a1 - x0, b0 - y0], [a1 - x0, b1 - y0], [a0 - x0, b1 - y0]], dtype=float)
-        mb.quad(floor, c_floor, uv / rep, (0, 0, 1))
+        with mb.labelled("floor"):
+            mb.quad(floor, c_floor, uv / rep, (0, 0, 1))
     for a0, b0, a1, b1 in subtract_rects(room.bounds, room.ceiling_holes):
         c_ceil = np.array([[a0, b1, H], [a1, b1, H], [a1, b0, H], [a0, b0, H]], dtype=float)
         uv_c = np.array([[a0 - x0, b1 - y0], [a1 - x0, b1 - y0], [a1 - x0, b0 - y0], [a0 - x0, b0 - y0]], dtype=float)
-        mb.quad(pal["ceiling"], c_ceil, uv_c / pal["ceiling"].repeat, (0, 0, -1))
+        with mb.labelled("ceiling"):
+            mb.quad(pal["ceiling"], c_ceil, uv_c / pal["ceiling"].repeat, (0, 0, -1))
     # ceiling light panels on a regular grid, none over a ceiling hole
     n = room.lights
     if n > 0:
@@ -92,7 +97,9 @@ def _build_room_shell(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict
                 cy = y0 + (j + 0.5) * d / rows
                 if any(_overlaps((cx - 0.3, cy - 0.6, cx + 0.3, cy + 0.6), h) for h in room.ceiling_holes):
                     continue
-                add_box(mb, (cx - 0.3, cy - 0.6, H - 0.02), (cx + 0.3, cy + 0.6, H - 0.001), pal["light"], None, skip=("+z",))
+                with mb.labelled("light"):
+                    add_box(mb, (cx - 0.3, cy - 0.6, H - 0.02), (cx + 0.3, cy + 0.6, H - 0.001), pal["light"], None,
+                            skip=("+z",))
 
 
 def _template_rng(seed: int, room: RoomSpec) -> np.random.Generator:
@@ -113,7 +120,8 @@ def _build_furniture(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict,
             yaw += rng.uniform(-0.35, 0.35)
             jx, jy = rng.uniform(-0.06, 0.06, 2)
         T = (yaw, np.array([x0 + item.x + jx, y0 + item.y + jy, layout.floor_z + room.floor_dz]))
-        fn(mb, pal, T, rng, item.variant)
+        with mb.labelled(item.kind):
+            fn(mb, pal, T, rng, item.variant)
 
 
 def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, bank: tx.TextureBank) -> None:
@@ -145,8 +153,11 @@ def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, 
         yaw, t = wall_pos[pic.wall]
         z = pic.z_center
         frame = pal["trim"] if pic.image == "whiteboard" else pal["frame"]
-        add_box(mb, (-w / 2 - border, -gap - depth, z - h / 2 - border), (w / 2 + border, -gap, z + h / 2 + border), frame, (yaw, t), skip=("+y",))
-        add_box(mb, (-w / 2, -gap - depth - 0.002, z - h / 2), (w / 2, -gap - depth, z + h / 2), {"-y": mat}, (yaw, t), skip=())
+        with mb.labelled("whiteboard" if pic.image == "whiteboard" else "picture"):
+            add_box(mb, (-w / 2 - border, -gap - depth, z - h / 2 - border), (w / 2 + border, -gap, z + h / 2 + border),
+                    frame, (yaw, t), skip=("+y",))
+            add_box(mb, (-w / 2, -gap - depth - 0.002, z - h / 2), (w / 2, -gap - depth, z + h / 2), {"-y": mat}, (yaw, t),
+                    skip=())
 
 
 # ----------------------------------------------------------------------------------------------
@@ -155,12 +166,14 @@ def _build_pictures(mb: MeshBuilder, layout: Layout, room: RoomSpec, pal: dict, 
 
 def validate_layout(layout: Layout) -> None:
     """Raise ValueError when furniture leaves its room, blocks a door, stands over a floor hole,
-    or is too tall off the walls, or when a floor/ceiling hole leaves its room."""
+    or is too tall off the walls, when a floor/ceiling hole leaves its room, when a picture
+    overlaps a door or window, or when a window or door leaves its wall or overlaps a doorway."""
     rooms = {r.name: r for r in layout.rooms}
     for d in layout.doors:
         if d.a not in rooms or d.b not in rooms:
             raise ValueError(f"door {d.a}-{d.b}: unknown room")
     gaps = door_gaps(layout)
+    holes = opening_spans(layout)
     ht = layout.wall_thickness / 2
     for room in layout.rooms:
         x0, y0, x1, y1 = room.bounds
@@ -176,6 +189,24 @@ def validate_layout(layout: Layout) -> None:
             for g0, g1, _ in gaps.get((orient, round_line(line)), []):
                 if hi > g0 - 0.1 and lo < g1 + 0.1:
                     raise ValueError(f"{layout.name}/{room.name}: picture {pic.image} on wall {pic.wall} overlaps a door")
+            for g0, g1, *_ in holes.get((orient, round_line(line)), []):
+                if hi > g0 - 0.1 and lo < g1 + 0.1:
+                    raise ValueError(f"{layout.name}/{room.name}: picture {pic.image} on wall {pic.wall} overlaps a "
+                                     "window or door")
+        for op in room.openings:
+            if op.kind not in OPENING_KINDS or op.wall not in ("N", "S", "E", "W"):
+                raise ValueError(f"{layout.name}/{room.name}: opening {op} has an unknown kind or wall")
+            orient, line, base = {"N": ("h", y1, x0), "S": ("h", y0, x0), "E": ("v", x1, y0), "W": ("v", x0, y0)}[op.wall]
+            span = (x0, x1) if orient == "h" else (y0, y1)
+            lo, hi = base + op.along - op.width / 2, base + op.along + op.width / 2
+            if lo < span[0] + layout.wall_thickness or hi > span[1] - layout.wall_thickness:
+                raise ValueError(f"{layout.name}/{room.name}: {op.kind} on wall {op.wall} leaves the wall")
+            if not 0 <= op.sill < op.top < layout.ceiling_height:
+                raise ValueError(f"{layout.name}/{room.name}: {op.kind} on wall {op.wall}: need 0 <= sill < top < "
+                                 "the ceiling height")
+            for g0, g1, _ in gaps.get((orient, round_line(line)), []):
+                if hi > g0 - 0.1 and lo < g1 + 0.1:
+                    raise ValueError(f"{layout.name}/{room.name}: {op.kind} on wall {op.wall} overlaps a doorway")
         for item in room.items:
             _, w, d, h = FURNITURE[item.kind]
             yaw = np.radians(item.yaw_deg)
@@ -192,7 +223,10 @@ def validate_layout(layout: Layout) -> None:
                 near = min(cx - hw - x0, x1 - cx - hw, cy - hd - y0, y1 - cy - hd)
                 if near > ht + 0.05:
                     raise ValueError(f"{layout.name}/{room.name}: tall {item.kind} must stand against a wall")
-            for (orient, line), glist in gaps.items():
+            door_spans = {key: list(glist) for key, glist in gaps.items()}
+            for key, hlist in holes.items():  # doors with a leaf need the same clearance; windows do not
+                door_spans.setdefault(key, []).extend((g0, g1, 0.0) for g0, g1, _, _, op in hlist if op.kind != "window")
+            for (orient, line), glist in door_spans.items():
                 for g0, g1, _ in glist:
                     # keep 0.6 m clear on both sides of each opening
                     if orient == "v":
@@ -220,6 +254,7 @@ def add_layout(mb: MeshBuilder, layout: Layout, pal: dict[str, Material], seed: 
     validate_layout(layout)
     wall_mats = {room.name: wall_material(mb, room.wall_color) for room in layout.rooms}
     build_walls(mb, layout, pal, wall_mats)
+    build_openings(mb, layout, pal)
     for room in layout.rooms:
         _build_room_shell(mb, layout, room, pal)
         _build_furniture(mb, layout, room, pal, seed)

@@ -54,7 +54,8 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
     """Remove vertices that are not finite in the world frame, and the faces using them.
 
     Args:
-        instances: (name, trimesh.Trimesh, (4, 4) file_from_mesh) per mesh instance.
+        instances: (name, trimesh.Trimesh, (4, 4) file_from_mesh, *rest) per mesh instance (``rest``
+            is passed through).
         world_from_file: (4, 4) rotation and scale of the file into the world frame.
         path: the file (for messages).
 
@@ -67,7 +68,7 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
     """
     bad_by_mesh: dict[int, np.ndarray] = {}
     total = bad = 0
-    for _, mesh, file_from_mesh in instances:
+    for _, mesh, file_from_mesh, *_ in instances:
         A = world_from_file @ file_from_mesh
         v = np.asarray(mesh.vertices, dtype=np.float64)
         if not np.all(np.isfinite(A)):
@@ -88,7 +89,7 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
     dropped_faces = 0
     done: set[int] = set()
     out = []
-    for name, mesh, file_from_mesh in instances:
+    for name, mesh, file_from_mesh, *rest in instances:
         key = id(mesh)
         if key not in done and bad_by_mesh[key].any():
             keep = ~bad_by_mesh[key][np.asarray(mesh.faces)].any(axis=1)
@@ -101,7 +102,7 @@ def drop_non_finite(instances: list[tuple], world_from_file: np.ndarray, path: P
                 mesh.update_vertices(finite)
         done.add(key)
         if len(mesh.faces) > 0 and np.all(np.isfinite(world_from_file @ file_from_mesh)):
-            out.append((name, mesh, file_from_mesh))
+            out.append((name, mesh, file_from_mesh, *rest))
     warn_once("%s: dropped %d of %d vertices with NaN or infinite coordinates and the %d faces using them",
                 path, bad, total, dropped_faces)
     return out

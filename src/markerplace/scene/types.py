@@ -31,6 +31,11 @@ class MeshPart:
             alpha < 0.9 or ``KHR_materials_transmission``; OBJ ``d`` < 0.9 or ``Tr`` > 0.1; see
             :mod:`markerplace.scene.transparency`). It still bounds free space (nobody walks
             through glass) but never carries a tag.
+        names: what the source calls the part, for :func:`markerplace.scene.semantics.classify`
+            (which keeps tags off windows, doors, furniture, ...): for a glTF file the node, its
+            parent nodes, the mesh and the material; for OBJ the object/group and the material;
+            for the procedural scenes the item's label (``"bookshelf"``, ``"wall"``, ``"door"``).
+            Empty when the source names nothing (a PLY scan): only geometry then tells.
     """
 
     name: str
@@ -42,6 +47,7 @@ class MeshPart:
     base_color: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     normals: np.ndarray | None = None
     transparent: bool = False
+    names: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -107,6 +113,10 @@ class Scene:
     def face_transparent(self) -> np.ndarray:
         """(F,) bool per face of :meth:`geometry`: the face belongs to a transparent part."""
         return np.concatenate([np.full(len(p.faces), bool(p.transparent)) for p in self.parts])
+
+    def face_part(self) -> np.ndarray:
+        """(F,) int64 index into :attr:`parts` of each face of :meth:`geometry`."""
+        return np.repeat(np.arange(len(self.parts), dtype=np.int64), [len(p.faces) for p in self.parts])
 
     def to_trimesh(self):
         """Untextured combined :class:`trimesh.Trimesh` for geometric queries (slicing, rays)."""

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imaging.engine import marker_key
-from ..runtime import cache
+from ..runtime import cache, run_folder
 from ..runtime.executor import make_executor
 from ..runtime.stages import cached
 from ..io_utils import atomic_path
@@ -109,7 +109,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     validate_evaluate_config(config)
     validate(plan_config)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    run_folder.make_dirs(out)
     work = Path(work_dir) if work_dir is not None else out
     cache_dir = work / "cache"
     timings: dict[str, float] = {}

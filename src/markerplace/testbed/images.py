@@ -24,7 +24,7 @@ from ..imaging.visibility import marker_points
 from ..io_utils import write_npy
 from ..markers import Marker
 from ..progress import progress_bar
-from ..runtime import cache
+from ..runtime import cache, run_folder
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +147,7 @@ class BaseImages:
                 writer.add(i, f)
             feats = writer.finish()
             mask = np.asarray(feats.extras.pop("in_view")).reshape(N, -1)
-            (feat_dir / "extra_in_view.npy").unlink(missing_ok=True)
+            run_folder.remove(feat_dir / "extra_in_view.npy")
             cache.mark_done(feat_dir, feat_key)
         if mask is None:
             mask = cache.load_fresh(mask_path, mask_key, lambda p: np.load(p, allow_pickle=False))
@@ -160,3 +160,4 @@ class BaseImages:
         self.features = feats
         self.in_view = mask.reshape(N, len(imaging.union))
         self.key = feat_key
+        self.digest = cache.hash_of(cache.content_digest(feat_dir), cache.content_digest(mask_path))

@@ -48,10 +48,11 @@ def map_images(tb: TestbedImaging, map_poses: np.ndarray, cache_dir: Path, base_
 def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages, num_clusters: int, seed: int,
                   timings: dict | None = None) -> tuple:
     """(codebook, key): the VLAD codebook trained on the marker-free map's descriptors,
-    ``cache_dir/vlad_codebook.npz``; the key fixes the map of every prediction made with it."""
+    ``cache_dir/vlad_codebook.npz``; the key (with the digest of the map's features) fixes the
+    map of every prediction made with it."""
     from ..localization.vlad import VladCodebook
 
-    key = cache.hash_of("vlad-v1", base_key, imaging, num_clusters, seed)
+    key = cache.hash_of("vlad-v2", base_key, map_base.digest, imaging, num_clusters, seed)
     codebook = cached("vlad_codebook", Path(cache_dir) / "vlad_codebook.npz", key,
                       lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
                                                  num_clusters=num_clusters, seed=seed),

@@ -16,7 +16,6 @@ compares both paths).
 from __future__ import annotations
 
 import logging
-import shutil
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -26,7 +25,8 @@ from typing import Sequence
 import numpy as np
 
 from ..imaging.features import ImageFeatures
-from ..runtime import cache
+from ..render.tags import DRAWING_VERSION
+from ..runtime import cache, run_folder
 from .images import BaseImages, TestbedImaging
 from .maps import localize_task, save_map
 from .placements import NO_MARKERS
@@ -136,7 +136,7 @@ class RenderedFeatures:
         self.store, self.set_key = store, set_key
 
     def _store_key(self, tb: TestbedImaging, i: int, key: tuple) -> str:
-        return cache.hash_of("render-v1", self.set_key, i, tb.appearance(key))
+        return cache.hash_of("render-v1", DRAWING_VERSION, self.set_key, i, tb.appearance(key))
 
     def update(self, tb: TestbedImaging, world_from_cam: np.ndarray, keys: list, markers: Sequence, map_only: bool,
                desc: str, indices: Sequence[int] | None = None) -> dict[int, ImageFeatures]:
@@ -201,7 +201,7 @@ class PlacementMaps:
         try:
             yield PlacementMap(Path(folder), changed, feats, vlad)
         finally:
-            shutil.rmtree(folder, ignore_errors=True)
+            run_folder.remove_tree(folder)
 
 
 def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg, world_from_cam: np.ndarray,
@@ -312,8 +312,9 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
         for s in sets.values():
             if p.test_sets is not None and s.name not in p.test_sets and not s.own:
                 continue
-            key = cache.hash_of("prediction-v1", cb_key, s.world_from_cam, marker_arr, lcfg, imaging) if s.exclude is None \
-                else cache.hash_of("map-prediction-v1", cb_key, s.world_from_cam, s.exclude, marker_arr, lcfg, imaging)
+            key = cache.hash_of("prediction-v2", DRAWING_VERSION, cb_key, s.base.digest, s.world_from_cam, marker_arr, lcfg, imaging) \
+                if s.exclude is None else cache.hash_of("map-prediction-v2", DRAWING_VERSION, cb_key, s.base.digest, s.world_from_cam,
+                                                        s.exclude, marker_arr, lcfg, imaging)
             est = load_prediction(pred_dir, key)
             if est is not None:
                 predictions[(p.method, p.run, p.k, s.name)] = est

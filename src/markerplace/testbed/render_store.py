@@ -23,6 +23,7 @@ import numpy as np
 
 from ..imaging.features import FeatureSet, ImageFeatures
 from ..io_utils import atomic_path
+from ..runtime import run_folder
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +54,7 @@ class RenderStore:
                         keys = [str(k) for k in z["keys"]]
                 except Exception as err:  # noqa: BLE001 - any damage: those renders are made again
                     log.warning("renders: dropping %s (%s)", p, err)
-                    p.unlink(missing_ok=True)
+                    run_folder.remove(p)
                     continue
                 self._index.update({k: (p, j) for j, k in enumerate(keys)})
                 self._next = max(self._next, int(p.stem.split("_")[1]) + 1)
@@ -97,7 +98,6 @@ class RenderStore:
         index = self._scan()
         keys = list(self._pending)
         fs = FeatureSet.from_images([self._pending[k] for k in keys])
-        self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / f"part_{self._next:06d}.npz"
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
