@@ -12,6 +12,7 @@ group (:mod:`interrupts`).
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -26,6 +27,7 @@ from interrupts import LIMIT_S, group_members, interrupt_cli
 from markerplace.runtime.interrupt import GRACE_S
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
+ENV = {**os.environ, "PYTHONPATH": SRC + (os.pathsep + os.environ["PYTHONPATH"] if os.environ.get("PYTHONPATH") else "")}
 FAST = ["--grid-spacing", "1.0", "--yaws", "4"]
 OBSERVE = "observe: rendering"
 
@@ -67,7 +69,7 @@ def test_watchdog_ends_a_command_stuck_in_a_c_call(tmp_path):
                 sys.exit(guard.stopped(err))
     """))
     proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={"PYTHONPATH": SRC}, start_new_session=True)
+                            env=ENV, start_new_session=True)
     child = int(proc.stdout.readline())  # a child in another session: only stop_children can end it
     time.sleep(0.5)  # inside the C call by now
     t0 = time.monotonic()
@@ -95,7 +97,7 @@ def frames(tmp_path_factory):
     root = tmp_path_factory.mktemp("frames")
     res = subprocess.run([sys.executable, "-m", "markerplace.cli", "--quiet", "scene", "export", "tiny",
                           str(root / "scan.ply"), "--as-scan", "--keep-frames", str(root / "frames")],
-                         capture_output=True, text=True, env={"PYTHONPATH": SRC}, timeout=600)
+                         capture_output=True, text=True, env=ENV, timeout=600)
     assert res.returncode == 0, res.stderr
     return root / "frames"
 
@@ -138,12 +140,13 @@ def test_fuse_stops_on_ctrl_c_and_writes_nothing(frames, tmp_path):
 def test_a_resumed_plan_is_the_plan_of_an_uninterrupted_run(tmp_path):
     """Ctrl-C half-way through observe, then the same command: the same placement.json, byte
     for byte, as a run that was never interrupted."""
-    argv = ["plan", "tiny", "-k", "3", "--yaws", "4", "--workers", "2", "--quiet"]
-    r = interrupt_cli([*argv[:-1], "--out", str(tmp_path / "a")], OBSERVE, delay=6.0)
+    argv = ["plan", "tiny", "-k", "3", "--workers", "2", "--quiet"]  # 248 poses: observe takes 10 s or more
+    r = interrupt_cli([*argv[:-1], "--out", str(tmp_path / "a")], OBSERVE, delay=4.0)
+    assert list((tmp_path / "a" / "observations").rglob("*.npz")), "nothing was observed before the signal"
     _assert_stopped(r)
     for name in ("a", "b"):
         res = subprocess.run([sys.executable, "-m", "markerplace.cli", *argv, "--out", str(tmp_path / name)],
-                             capture_output=True, text=True, env={"PYTHONPATH": SRC}, timeout=600)
+                             capture_output=True, text=True, env=ENV, timeout=600)
         assert res.returncode == 0, res.stderr
     assert (tmp_path / "a" / "placement.json").read_bytes() == (tmp_path / "b" / "placement.json").read_bytes()
 
@@ -156,7 +159,7 @@ def test_sigkill_of_the_main_process_leaves_no_worker_and_no_traceback(tmp_path)
     with log.open("w") as fh:
         proc = subprocess.Popen([sys.executable, "-m", "markerplace.cli", "plan", "tiny", "-k", "3", "--yaws", "4",
                                  "--workers", "2", "--out", str(tmp_path / "p")], stdout=fh, stderr=subprocess.STDOUT,
-                                env={"PYTHONPATH": SRC}, start_new_session=True)
+                                env=ENV, start_new_session=True)
         try:
             deadline = time.monotonic() + 300
             while OBSERVE not in log.read_text() and time.monotonic() < deadline and proc.poll() is None:

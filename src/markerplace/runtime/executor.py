@@ -35,8 +35,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from ..errors import UserError
 from .cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
-from .workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool, \
-    worker_signals
+from .workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -113,8 +112,7 @@ def _run_batch(job: WorkerJob, fn: Callable, batch: list[tuple[int, Any]]) -> li
     return [(i, fn(state, item)) for i, item in batch]
 
 
-def _pool_init(job: WorkerJob, parent_pid: int | None = None) -> None:
-    worker_signals(parent_pid)
+def _pool_init(job: WorkerJob) -> None:
     _state(job)
 
 
@@ -203,7 +201,7 @@ class PoolExecutor(Executor):
 
     def _pool(self, job: WorkerJob):
         if job.key not in self._pools:
-            ctx = spawn_pool(self.workers, _pool_init, (job, os.getpid()))
+            ctx = spawn_pool(self.workers, _pool_init, (job,))
             self._pools[job.key] = (ctx, ctx.__enter__())
         return self._pools[job.key][1]
 

@@ -31,8 +31,10 @@ import signal
 import sys
 import threading
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
-__all__ = ["Terminated", "InterruptGuard", "stop_children", "exit_code", "resume_message", "GRACE_S",
+__all__ = ["Terminated", "InterruptGuard", "deferred", "stop_children", "exit_code", "resume_message", "GRACE_S",
            "CHILD_WAIT_S"]
 
 GRACE_S = 3.0
@@ -45,6 +47,29 @@ _STOP = b"\x00"  # written to the wakeup pipe to end the watchdog (no signal has
 
 class Terminated(KeyboardInterrupt):
     """Raised in the main thread on SIGTERM, so that SIGTERM cleans up as Ctrl-C does."""
+
+
+_deferring = 0  # depth of deferred() blocks (main thread)
+_pending: list[int] = []  # the signal that arrived inside one
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """A block that a Ctrl-C or SIGTERM does not cut in two (under :class:`InterruptGuard`): the
+    signal is held and raised when the block ends. For steps that leave a mess when cut, such as
+    starting a process pool (a worker whose parent stops writing its start-up data dies with an
+    ``EOFError`` traceback, and a half-built pool is never terminated). The watchdog still ends
+    the process ``GRACE_S`` after the signal."""
+    global _deferring
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+        if _deferring == 0 and _pending:
+            signum = _pending.pop()
+            _pending.clear()
+            raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def exit_code(signum: int) -> int:
@@ -119,6 +144,9 @@ class InterruptGuard:
         if self.signum is not None:
             return  # already stopping: the watchdog enforces the deadline
         self.signum = signum
+        if _deferring:  # raised when the deferred() block ends
+            _pending.append(signum)
+            return
         if signum == signal.SIGTERM:
             raise Terminated()
         raise KeyboardInterrupt()

@@ -5,12 +5,14 @@ numerical libraries single-threaded: threaded BLAS / OpenMP / OpenCV on small pe
 problems is several times slower when the workers already fill the cores. Workers are spawned
 (not forked) so no GL or BLAS state is inherited.
 
-Workers never see SIGINT: a terminal's Ctrl-C goes to the whole process group, and only the
-main process should react (terminate the pool, print how to resume;
-:mod:`markerplace.runtime.interrupt`). Children started inside :func:`children_without_sigint`
-inherit a blocked SIGINT, and the pool initializer :func:`worker_signals` ignores it for good and
-asks the kernel to end the worker when the main process dies (even by SIGKILL), so no worker is
-left behind writing ``BrokenPipeError`` tracebacks.
+Signals: a terminal's Ctrl-C (and ``kill -TERM -PGID``) goes to the whole process group, and
+only the main process should react (terminate the pool, print how to resume;
+:mod:`markerplace.runtime.interrupt`). Pool workers start with SIGINT and SIGTERM blocked
+(:func:`children_without_sigint`); :func:`worker_signals` then ignores SIGINT, lets SIGTERM end
+the worker only when the main process stops the pool (a worker killed by the group's SIGTERM
+would be respawned while the pool is being stopped), and asks the kernel to kill the worker
+when the main process dies (even by SIGKILL), so no worker is left behind writing
+``BrokenPipeError`` tracebacks.
 """
 
 from __future__ import annotations
@@ -41,21 +43,23 @@ def single_threaded_libraries() -> None:
 
 
 @contextmanager
-def children_without_sigint() -> Iterator[None]:
-    """Block SIGINT in the calling (main) thread for the duration: processes and threads started
-    inside inherit the blocked signal (so a Dask ``LocalCluster``'s event-loop thread and the
-    worker processes it spawns never get a ``KeyboardInterrupt``). A SIGINT arriving meanwhile
-    is delivered to the main process as usual (another thread takes it, or the main thread when
-    the block ends); nothing is lost."""
+def children_without_sigint(sigterm: bool = False) -> Iterator[None]:
+    """Block SIGINT (and with ``sigterm`` SIGTERM) in the calling (main) thread for the duration:
+    processes and threads started inside inherit the blocked signals (so a Dask
+    ``LocalCluster``'s event-loop thread and the worker processes it spawns never get a
+    ``KeyboardInterrupt``; a pool worker unblocks them in :func:`worker_signals`, once its
+    handlers are in place). A signal arriving meanwhile reaches the main process as usual
+    (another thread takes it, or the main thread when the block ends); nothing is lost."""
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    # multiprocessing starts its resource tracker on first use and then UNBLOCKS SIGINT in the
-    # thread that started it (instead of restoring the mask): start it now, outside the block
+    # multiprocessing starts its resource tracker on first use and then UNBLOCKS SIGINT and
+    # SIGTERM in the thread that started it (instead of restoring the mask): start it now
     from multiprocessing import resource_tracker
 
     resource_tracker.ensure_running()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    blocked = {signal.SIGINT, signal.SIGTERM} if sigterm else {signal.SIGINT}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
     try:
         yield
     finally:
@@ -65,25 +69,39 @@ def children_without_sigint() -> Iterator[None]:
 _PR_SET_PDEATHSIG = 1
 
 
-def worker_signals(parent_pid: int | None = None) -> None:
-    """Call first in a worker process: ignore SIGINT (only the main process handles Ctrl-C) and,
-    on Linux, receive SIGTERM when the parent dies, so a killed main process leaves no worker.
+def worker_signals(parent_pid: int, stop) -> None:
+    """Call first in a pool worker. SIGINT is ignored: only the main process handles Ctrl-C.
+    SIGTERM ends the worker only when the pool is being stopped (``stop``, a multiprocessing
+    Event the main process sets before ``Pool.terminate``) or the parent is gone: a SIGTERM
+    sent to the whole process group is the main process's to handle, and a worker that died
+    of it would be respawned by the pool while the main process stops it. On Linux the kernel
+    kills the worker (SIGKILL) when the main process dies, even by SIGKILL.
 
     Args:
         parent_pid: the main process's pid; a worker whose parent is already gone exits at once.
+        stop: the pool's stop event.
     """
+    def on_sigterm(signum, frame):
+        if stop.is_set() or os.getppid() != parent_pid:
+            os._exit(0)
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending SIGINT was just discarded
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-    except (OSError, AttributeError):  # pragma: no cover - no prctl
-        return
-    if parent_pid is not None and os.getppid() != parent_pid:
+    signal.signal(signal.SIGTERM, on_sigterm)
+    if hasattr(signal, "pthread_sigmask"):  # a pending SIGINT was just discarded, a SIGTERM is handled
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl
+            pass
+    if os.getppid() != parent_pid:
         os._exit(1)  # the parent died before prctl: nobody will read our results
+
+
+def _worker_init(parent_pid: int, stop, initializer: Callable, initargs: tuple) -> None:
+    worker_signals(parent_pid, stop)
+    initializer(*initargs)
 
 
 @contextmanager
@@ -91,15 +109,31 @@ def spawn_pool(workers: int, initializer: Callable, initargs: tuple) -> Iterator
     """A spawned pool whose children start with single-threaded BLAS / OpenMP.
 
     The parent's environment is restored as soon as the children have started. The children
-    (and the pool's own threads, which respawn workers) start with SIGINT blocked
-    (:func:`children_without_sigint`); ``initializer`` should call :func:`worker_signals`. On an
-    exception in the ``with`` body the pool is terminated (workers get SIGTERM), not joined.
+    (and the pool's own threads, which respawn workers) start with SIGINT and SIGTERM blocked
+    (:func:`children_without_sigint`) and run :func:`worker_signals` before ``initializer``. On
+    an exception in the ``with`` body the pool is terminated (its stop event set, workers sent
+    SIGTERM), not joined.
     """
+    from .interrupt import deferred
+
+    ctx = mp.get_context("spawn")
+    stop = ctx.Event()
     saved = {k: os.environ.get(k) for k in THREAD_ENV}
     os.environ.update({k: "1" for k in THREAD_ENV})
+    pool = None
+
+    def terminate() -> None:
+        stop.set()
+        pool.terminate()
+
     try:
-        with children_without_sigint():
-            pool = mp.get_context("spawn").Pool(workers, initializer=initializer, initargs=initargs)
+        with children_without_sigint(sigterm=True), deferred():  # a signal now would leave half-started workers
+            pool = ctx.Pool(workers, initializer=_worker_init, initargs=(os.getpid(), stop, initializer, initargs))
+    except BaseException:
+        if pool is not None:  # the signal held while the pool started: stop it
+            terminate()
+            pool.join()
+        raise
     finally:
         for k, v in saved.items():
             if v is None:
@@ -110,7 +144,7 @@ def spawn_pool(workers: int, initializer: Callable, initargs: tuple) -> Iterator
         yield pool
         pool.close()
     except BaseException:
-        pool.terminate()
+        terminate()
         raise
     finally:
         pool.join()
