@@ -42,11 +42,15 @@ def _one_line(capsys, code: int, needle: str = "") -> str:
 
 
 @pytest.fixture(autouse=True)
-def _quiet_log():
+def _fresh_log():
+    """The CLI's logger as a fresh process has it (set up by main()), restored afterwards."""
     import logging
 
-    logging.getLogger("markerplace").handlers.clear()  # bind the CLI's log handler to capsys
+    logger = logging.getLogger("markerplace")
+    saved = logger.handlers[:], logger.level, logger.propagate
+    logger.handlers.clear()
     yield
+    logger.handlers[:], logger.level, logger.propagate = saved
 
 
 # --- argument errors: one line ---------------------------------------------------------------------
