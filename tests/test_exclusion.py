@@ -37,7 +37,8 @@ def test_spots_and_boxes(tmp_path):
 
 
 @pytest.mark.parametrize("doc, message", [
-    ("{not json", "not readable JSON"),
+    ("{not json", "not valid JSON"),
+    ("[" * 100_000, "100000 deep"),
     ([1, 2], "must be a JSON object"),
     ({"spots": []}, "nothing to exclude"),
     ({"spots": [{"x": 1, "y": 2}]}, "spot 1 has no z"),

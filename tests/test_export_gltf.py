@@ -170,7 +170,7 @@ def test_export_of_a_far_centimetre_obj_keeps_its_units_and_origin(tiny_plan, tm
 @pytest.mark.parametrize("setup, args, message", [
     ("none", ["export", "{d}/missing", "--gltf", "{d}/o.glb"], "is not a folder"),
     ("empty", ["export", "{d}/empty", "--gltf", "{d}/o.glb"], "is not a plan folder"),
-    ("badjson", ["export", "{d}/bad", "--gltf", "{d}/o.glb"], "not readable JSON"),
+    ("badjson", ["export", "{d}/bad", "--gltf", "{d}/o.glb"], "not valid JSON"),
     ("none", ["export", "{d}", "--gltf", "{d}/o.gltf"], "must end in .glb"),
 ])
 def test_export_errors_are_one_line(setup, args, message, tmp_path, capsys):

@@ -25,21 +25,21 @@ def test_marker_file_round_trip(tmp_path):
     ("not json", "not valid JSON"),
     ('{"foo": 1}', "must hold a list"),
     ('[{"size": 0.4, "position": [0,0,0], "normal": [1,0,0]}]', "tag_id"),
-    ('[{"tag_id": 1, "size": 40, "position": [0,0,0], "normal": [1,0,0]}]', "out of range"),
+    ('[{"tag_id": 1, "size": 40, "position": [0,0,0], "normal": [1,0,0]}]', "in 0.01-5"),
     ('[{"tag_id": 1}]', "position"),
     ('["x"]', "entry 0"),
-    ('[{"tag_id": "a", "size": 0.4, "position": [0,0,0], "normal": [1,0,0]}]', "malformed"),
-    ('[{"tag_id": 1, "size": "big", "position": [0,0,0], "normal": [1,0,0]}]', "malformed"),
+    ('[{"tag_id": "a", "size": 0.4, "position": [0,0,0], "normal": [1,0,0]}]', "not an integer"),
+    ('[{"tag_id": 1, "size": "big", "position": [0,0,0], "normal": [1,0,0]}]', "not a number of metres"),
     ('[{"tag_id": 1, "size": 0.4, "position": [0,0], "normal": [1,0,0]}]', "3 numbers"),
-    ('[{"tag_id": 1, "size": 0.4, "position": [0,0,0], "normal": [0,0,0]}]', "malformed"),
-    ('[{"tag_id": 1, "world_from_marker": [[1,0],[0]]}]', "malformed"),
+    ('[{"tag_id": 1, "size": 0.4, "position": [0,0,0], "normal": [0,0,0]}]', "zero or vertical"),
+    ('[{"tag_id": 1, "world_from_marker": [[1,0],[0]]}]', "4x4"),
 ])
 def test_bad_marker_files(tmp_path, content, message):
     path = tmp_path / "m.json"
     path.write_text(content)
     with pytest.raises(UserError, match=message):
         load_markers(path)
-    with pytest.raises(UserError, match="not found"):
+    with pytest.raises(UserError, match="no such file"):
         load_markers(tmp_path / "missing.json")
 
 

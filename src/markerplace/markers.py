@@ -63,58 +63,154 @@ class Marker:
         }
 
 
+ROTATION_TOLERANCE = 1e-3
+"""Largest |R^T R - I| entry of a ``world_from_marker`` rotation read from a file (float32 round trips
+and 6-digit exports stay far below it; a scaled, sheared or mirrored matrix does not)."""
+
+
+def check_tag_id(value, where: str = "tag_id") -> int:
+    """``value`` as a tag36h11 id: a JSON integer (not ``true``, ``1.5``, ``"3"`` or ``1e30``) in
+    0..586. Raises :class:`UserError` naming ``where``."""
+    from .render.tags import NUM_TAGS
+
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise UserError(f"{where} {_short(value)} is not an integer: give a "
+                        f"{FAMILY} id, 0..{NUM_TAGS - 1}")
+    if not 0 <= int(value) < NUM_TAGS:
+        raise UserError(f"{where} {int(value)} is outside {FAMILY} (0..{NUM_TAGS - 1}): give the id printed on the tag")
+    return int(value)
+
+
+def _jsonable(value) -> bool:
+    try:
+        json.dumps(value)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def _numbers(value, shape: tuple, what: str) -> np.ndarray:
+    """A nested list of JSON numbers of ``shape`` as a finite float64 array, or :class:`UserError`."""
+    def ok(v) -> bool:
+        if isinstance(v, list):
+            return all(ok(x) for x in v)
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if not isinstance(value, list) or not ok(value):
+        raise UserError(f"'{what}' must be {_shape_text(shape)} numbers, not {_short(value)}")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (ValueError, OverflowError):  # ragged lists, huge integers
+        raise UserError(f"'{what}' must be {_shape_text(shape)} numbers, not {_short(value)}") from None
+    if arr.shape != shape:
+        raise UserError(f"'{what}' must be {_shape_text(shape)} numbers, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise UserError(f"'{what}' holds NaN or infinite numbers: give finite coordinates in metres")
+    return arr
+
+
+def _shape_text(shape: tuple) -> str:
+    return "a 4x4 nested list of" if shape == (4, 4) else f"{shape[0]}"
+
+
+def _short(value) -> str:
+    text = json.dumps(value) if _jsonable(value) else repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def check_pose(T: np.ndarray, what: str = "world_from_marker", tolerance: float = ROTATION_TOLERANCE) -> np.ndarray:
+    """``T`` (4, 4) if it is a rigid pose: finite, last row (0, 0, 0, 1), rotation orthonormal
+    within ``tolerance`` with determinant +1; else :class:`UserError`."""
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise UserError(f"'{what}' must be a 4x4 matrix of finite numbers")
+    if np.abs(T[3] - (0.0, 0.0, 0.0, 1.0)).max() > tolerance:
+        raise UserError(f"'{what}' must have the last row 0, 0, 0, 1 (a rigid pose)")
+    R = T[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    if err > tolerance:
+        raise UserError(f"'{what}' has a rotation that is not orthonormal (|R^T R - I| = {err:.2g}, tolerance "
+                        f"{tolerance:g}): give a rotation without scale or shear")
+    if np.linalg.det(R) < 0:
+        raise UserError(f"'{what}' has a mirroring rotation (determinant -1): give a right-handed pose")
+    return T
+
+
 def marker_from_json(d: dict, default_size: float = DEFAULT_TAG_SIZE) -> Marker:
-    """Parse one marker dict (see module docstring). Raises :class:`UserError` on bad input."""
-    tag_id = d.get("tag_id", d.get("id"))
-    if tag_id is None:
+    """Parse one marker dict (see module docstring). Raises :class:`UserError` on bad input:
+    a tag id that is not an integer of tag36h11 (:func:`check_tag_id`), a size that is not a
+    number in 0.01-5 m, a pose that is not finite and rigid (:func:`check_pose`), a normal of
+    length 0 or vertical."""
+    if not isinstance(d, dict):
+        raise UserError("not an object with tag_id, size, position/normal")
+    key = "tag_id" if "tag_id" in d else "id"
+    if key not in d:
         raise UserError("marker entry has no 'tag_id': give each marker an AprilTag id")
+    tag_id = check_tag_id(d[key], key)
     family = d.get("family", FAMILY)
     if family != FAMILY:
-        raise UserError(f"marker family {family!r} is not supported: use {FAMILY}")
-    size = float(d.get("size", default_size))
-    if not 0.01 <= size <= 5.0:
-        raise UserError(f"marker size {size} m is out of range: give the black-square edge in metres (0.01-5)")
+        raise UserError(f"marker family {_short(family)} is not supported: use {FAMILY}")
+    size = d.get("size", default_size)
+    if isinstance(size, bool) or not isinstance(size, (int, float)) or not 0.01 <= size <= 5.0:
+        raise UserError(f"marker size {_short(size)} is not a number of metres in 0.01-5: give the black-square edge")
     if "world_from_marker" in d:
-        T = np.asarray(d["world_from_marker"], dtype=float)
-        if T.shape != (4, 4):
-            raise UserError("marker 'world_from_marker' must be a 4x4 nested list")
+        T = check_pose(_numbers(d["world_from_marker"], (4, 4), "world_from_marker"))
     elif "position" in d and "normal" in d:
-        position, normal = np.asarray(d["position"], float), np.asarray(d["normal"], float)
-        if position.shape != (3,) or normal.shape != (3,):
-            raise UserError("marker 'position' and 'normal' must each be 3 numbers")
+        position = _numbers(d["position"], (3,), "position")
+        normal = _numbers(d["normal"], (3,), "normal")
+        if np.linalg.norm(normal[:2]) < 1e-6 * max(1.0, float(np.linalg.norm(normal))):
+            raise UserError(f"'normal' {_short(d['normal'])} is zero or vertical: give the wall normal towards "
+                            "viewers (tags hang on walls)")
         T = world_from_marker_pose(position, normal)
     else:
         raise UserError("marker entry needs 'world_from_marker' or both 'position' and 'normal'")
     # at the precision JSON files are written with (io_utils.write_json): a marker written back
     # (config.json's existing markers) and read again is bit for bit the one used
-    return Marker(int(tag_id), size, clean_array(T), family)
+    return Marker(tag_id, float(size), clean_array(T), family)
 
 
-def load_markers(path: str | Path) -> list[Marker]:
-    """Read a marker JSON file. Raises :class:`UserError` with a one-line message on bad input."""
+def load_markers(path: str | Path, option: str | None = None,
+                 default_size: float = DEFAULT_TAG_SIZE) -> list[Marker]:
+    """Read a marker JSON file (:func:`markerplace.jsonfile.read_json`'s guards). Raises
+    :class:`UserError` with a one-line message on bad input, duplicate tag ids included.
+
+    Args:
+        path: the file.
+        option: how the user gave it (``"--existing"``), for messages; default "marker file".
+        default_size: black-square edge (metres) of entries without ``size``.
+    """
+    from .jsonfile import read_json
+
     path = Path(path)
-    if not path.is_file():
-        raise UserError(f"marker file not found: {path}")
-    try:
-        data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"marker file {path} is not valid JSON ({exc.__class__.__name__}): fix or re-export it")
+    what = f"{option} {path}" if option else f"marker file {path}"
+    data = read_json(path, what)
     entries = data.get("markers") if isinstance(data, dict) else data
     if not isinstance(entries, list):
-        raise UserError(f"marker file {path} must hold a list of markers or an object with a 'markers' list")
-    markers = []
+        raise UserError(f"{what} must hold a list of markers or an object with a 'markers' list")
+    markers: list[Marker] = []
+    seen: dict[int, int] = {}
     for i, entry in enumerate(entries):
         try:
-            if not isinstance(entry, dict):
-                raise UserError(f"entry {i} is not an object with tag_id, size, position/normal")
-            markers.append(marker_from_json(entry))
+            m = marker_from_json(entry, default_size=default_size)
         except UserError as err:
-            raise UserError(f"marker file {path}, entry {i}: {err}") from None
-        except (ValueError, TypeError) as err:
-            raise UserError(f"marker file {path}, entry {i}: malformed value ({err}); "
-                            "tag_id is an integer, size a number, position/normal 3 numbers, "
-                            "world_from_marker a 4x4 list") from None
+            raise UserError(f"{what}, entry {i}: {err}") from None
+        if m.tag_id in seen:
+            raise UserError(f"{what}: tag id {m.tag_id} is listed twice (entries {seen[m.tag_id]} and {i}); each "
+                            "printed tag id hangs once")
+        seen[m.tag_id] = i
+        markers.append(m)
     return markers
+
+
+def check_tag_budget(k: int, existing: list[Marker], first_tag_id: int = 0) -> None:
+    """Refuse a plan whose ``k`` new tags cannot get ids of their own in tag36h11 next to the
+    ``existing`` ones (placed ids count up from ``first_tag_id``, skipping existing ids)."""
+    from .render.tags import NUM_TAGS
+
+    free = NUM_TAGS - first_tag_id - sum(1 for m in existing if m.tag_id >= first_tag_id)
+    if k > free:
+        raise UserError(f"-k {k}: {FAMILY} has {NUM_TAGS} ids and {len(existing)} are taken by existing tags, so at most "
+                        f"{max(free, 0)} new tags can be placed")
 
 
 WALL_TOLERANCE_M = 0.05

@@ -41,8 +41,9 @@ def format_duration(seconds: float) -> str:
 
 class LogProgress:
     """Counts done items and logs ``desc: done/total unit (p %), rate, about T left`` at
-    most every ``interval_s`` seconds, then ``desc: total unit in T`` when closed; the same
-    ``update``/context-manager interface as a tqdm bar.
+    most every ``interval_s`` seconds (and ``desc: starting, ...`` at debug level), then ``desc: total unit in T`` when closed (not when the
+    ``with`` block ends in an exception, e.g. Ctrl-C); the same ``update``/context-manager
+    interface as a tqdm bar.
 
     Args:
         total: number of items, >= 0.
@@ -60,6 +61,7 @@ class LogProgress:
         self._t0 = self._last = self._started = clock()
         self._closed = False
         self._warm = False
+        log.debug("%s: starting, %d/%d %s", desc, self.n, self.total, unit)
 
     def update(self, n: int = 1) -> None:
         """Count ``n`` more done items; log a line when ``interval_s`` has passed since the last."""
@@ -90,7 +92,10 @@ class LogProgress:
     def __enter__(self) -> "LogProgress":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:  # stopped (Ctrl-C, an error): no "done" line for a loop that was not
+            self._closed = True
+            return
         self.close()
 
 

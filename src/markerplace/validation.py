@@ -111,7 +111,7 @@ YAW_DEG = Bound("yaw", -1e6, 1e6, "deg", "a yaw in degrees")
 
 VOXEL = Bound("--voxel", 0.001, 1.0, "m", "a TSDF voxel edge in metres, e.g. 0.02")
 DEPTH_MAX = Bound("--depth-max", 0.1, 100.0, "m", "a depth cut-off in metres, e.g. 4")
-EVERY = Bound("--every", 1, 1_000_000, "", "use every N-th frame, e.g. 1", integer=True)
+EVERY = Bound("--every", 1, 1_000_000, "", "a frame step N (every N-th frame is fused), e.g. 1", integer=True)
 MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 0.02")
 CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", integer=True)
 MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
@@ -146,7 +146,10 @@ def command_name(args) -> str:
 
 def check_args(args) -> None:
     """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
-    default, skipped) and parse-check ``--pose``, ``--start`` and ``evaluate --k``."""
+    default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
+    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
+    with it). Whether a scheduler answers is checked once the output paths are
+    (:func:`markerplace.cli.options.check_cluster_answers`)."""
     for dest, bound in BOUNDS.get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -155,8 +158,15 @@ def check_args(args) -> None:
         parse_floats(args.pose, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
     if getattr(args, "start", None) is not None:
         parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
-    if command_name(args) == "evaluate" and isinstance(getattr(args, "k", None), str):
+    if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
+    if getattr(args, "cluster", None) is not None:
+        from .runtime.cluster import parse_cluster
+
+        parse_cluster(args.cluster)
+        if getattr(args, "workers", 0):
+            raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
+                            "workers do the work (give their number in local:N); leave --workers out")
 
 
 def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:
@@ -181,22 +191,31 @@ def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[
 
 
 def parse_int_list(text: str, option: str, bound: Bound) -> tuple[int, ...]:
-    """Parse a comma-separated list of integers, each within ``bound``."""
+    """Parse a comma-separated list of integers, each within ``bound`` (not empty, no empty item)."""
+    items = [v.strip() for v in str(text).split(",")]
+    if not any(items):
+        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
+    if not all(items):
+        raise UserError(f"{option} {text!r} has an empty item: give integers separated by single commas, e.g. 5,10,15,20")
     try:
-        values = tuple(int(v) for v in str(text).split(",") if v.strip())
+        values = tuple(int(v) for v in items)
     except ValueError:
         raise UserError(f"{option} {text!r} must be a comma-separated list of integers, e.g. 5,10,15,20") from None
-    if not values:
-        raise UserError(f"{option} {text!r} is empty: give e.g. 5,10,15,20")
     for v in values:
         bound.check(v)
     return values
 
 
 def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
-    """Parse a comma-separated list of finite numbers, each within ``bound`` (may be empty)."""
+    """Parse a comma-separated list of finite numbers, each within ``bound`` (``""`` is the empty
+    list; an empty item between commas is refused)."""
+    items = [v.strip() for v in str(text).split(",")]
+    if not any(items):
+        return ()
+    if not all(items):
+        raise UserError(f"{option} {text!r} has an empty item: give numbers separated by single commas, e.g. 0.1,0.25")
     try:
-        values = tuple(float(v) for v in str(text).split(",") if v.strip())
+        values = tuple(float(v) for v in items)
     except ValueError:
         raise UserError(f"{option} {text!r} must be a comma-separated list of numbers, e.g. 0.1,0.25") from None
     for v in values:

@@ -41,7 +41,7 @@ def evaluate_config_from_args(args: argparse.Namespace):
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
-    from .options import plan_config_for_budgets, plan_inputs_in_scene_frame
+    from .options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
     from ..testbed.config import validate_evaluate_config
     from ..testbed.placements import find_placement_files, method_names
     from ..markers import load_markers
@@ -59,8 +59,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     # every input file is read before any work: a bad --placements fails in a second, not after the plan
     placement_files = find_placement_files(args.placements) if args.placements else {}
     for path in placement_files.values():
-        load_markers(path)
+        load_markers(path, "--placements")
     open_run_folder(args.out, "evaluate", adopt=args.adopt)
+    check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))
     result = run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,

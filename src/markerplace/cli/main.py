@@ -1,7 +1,9 @@
 """Command line: parses arguments and chains library stages; no logic of its own.
 
 Every user-fixable problem surfaces as :class:`~markerplace.errors.UserError`: printed as one
-line ``markerplace: error: ...`` with exit code 2.
+line ``markerplace: error: ...`` with exit code 2; so does every argument error
+(:class:`OneLineParser`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
+/ 143 and one line saying how to resume (:mod:`markerplace.runtime.interrupt`).
 """
 
 from __future__ import annotations
@@ -9,11 +11,13 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from .. import __version__
 from ..errors import UserError
 from ..log import setup_logging
-from .options import add_plan_args, add_scene_args, plan_config_from_args, plan_inputs_in_scene_frame
+from .options import (add_plan_args, add_scene_args, check_cluster_answers, plan_config_from_args,
+                      plan_inputs_in_scene_frame)
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -40,6 +44,9 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
     from ..scene.export import export_glb
 
     check_output_file(args.out, "scene export OUT")
+    if Path(args.out).suffix.lower() != ".glb":
+        raise UserError(f"scene export OUT {args.out!r} must end in .glb (binary glTF with the textures inside; "
+                        "--as-scan writes .ply)")
     scene = load_scene(args.name, seed=args.seed)
     export_glb(scene, args.out)
     log.info("wrote %s (%d faces)", args.out, scene.num_faces)
@@ -60,9 +67,10 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     pose = _parse_pose(args.pose) if args.pose else None
     check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
+    user_markers = load_markers(args.markers, "--markers") if args.markers else []
     scene = load_scene(args.scene, up=args.up, unit_scale=args.unit_scale, seed=args.seed)
     offset = world_offset(scene)  # inputs are in the user's (file) frame
-    markers = markers_to_internal(load_markers(args.markers), offset) if args.markers else []
+    markers = markers_to_internal(user_markers, offset)
     if pose is not None:
         position = points_to_internal(pose[:3], offset)
         check_pose_in_scene(scene, position, offset)
@@ -80,7 +88,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from ..markers import check_markers_on_walls, load_markers
+    from ..markers import check_markers_on_walls, check_tag_budget, load_markers
     from ..scene.spec import SceneSpec
     from ..plan.placement import check_k
     from ..plan.planner import first_pick_gain, place, prepare, validate
@@ -95,12 +103,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if config.placement.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(config.placement.method).calibrated:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
-    existing = load_markers(args.existing) if args.existing else []
+    existing = load_markers(args.existing, "--existing") if args.existing else []
+    check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
     from ..plan.exclusion import apply_exclusion, load_exclusion, previous_markers
 
     exclusion = load_exclusion(args.exclude) if args.exclude else None
     previous = previous_markers(args.out, args.scene)  # to say what this run changes
     open_run_folder(args.out, "plan", adopt=args.adopt)  # marked, locked; released by main()
+    check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     scene = spec.load()
     offset = world_offset(scene)  # user inputs and outputs are in the file's frame
@@ -115,7 +125,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     with make_executor(run_config.runtime) as executor:
         size_check = measured_size_check(scene, spec, run_config, config.placement.k, force=args.force)
         data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor,
-                       before_observe=size_check)
+                       k=config.placement.k, before_observe=size_check)
         check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
     if exclusion is not None:
@@ -144,8 +154,19 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line ``markerplace: error: ...`` (exit code 2),
+    naming the subcommand's ``--help``, instead of argparse's usage block. Subparsers made by
+    ``add_subparsers`` are of the same class."""
+
+    def error(self, message: str):
+        text = " ".join(str(message).split())
+        sys.stderr.write(f"markerplace: error: {text} (see `{self.prog} --help`)\n")
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="markerplace",
         description="Plan where to put AprilTag markers so camera localization works better (OMP), and prove it in simulation.",
     )
@@ -236,30 +257,37 @@ def join_signed_values(argv: list[str]) -> list[str]:
     return out
 
 
+RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
+"""Commands that cache their stages in their output folder: an interrupted one resumes."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
-    setup_logging(quiet=args.quiet, verbose=args.verbose)
-    func = getattr(args, "func", None)
-    if func is None:
-        # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
-        if args.command == "scene":
-            parser.parse_args(["scene", "--help"])
-        parser.print_help()
-        return 2
-    try:
-        from ..validation import check_args
+    from ..runtime.interrupt import InterruptGuard
 
-        check_args(args)  # every numeric option of every subcommand: finite and in range
+    with InterruptGuard() as guard:
         try:
-            return int(func(args) or 0)
-        finally:
-            from ..runtime.run_folder import close_all
+            parser = build_parser()
+            args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
+            setup_logging(quiet=args.quiet, verbose=args.verbose)
+            guard.resumable = args.command in RESUMABLE_COMMANDS
+            func = getattr(args, "func", None)
+            if func is None:
+                # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
+                if args.command == "scene":
+                    parser.parse_args(["scene", "--help"])
+                parser.print_help()
+                return 2
+            from ..validation import check_args
 
-            close_all()  # unlock the run folders; one the run wrote nothing into is left as found
-    except UserError as err:
-        print(f"markerplace: error: {err}", file=sys.stderr)
-        return err.exit_code
-    except KeyboardInterrupt:
-        print("markerplace: interrupted", file=sys.stderr)
-        return 130
+            check_args(args)  # every numeric option of every subcommand: finite and in range
+            try:
+                return int(func(args) or 0)
+            finally:
+                from ..runtime.run_folder import close_all
+
+                close_all()  # unlock the run folders; one the run wrote nothing into is left as found
+        except UserError as err:
+            print(f"markerplace: error: {err}", file=sys.stderr)
+            return err.exit_code
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (runtime.interrupt.Terminated)
+            return guard.stopped(err)

@@ -16,8 +16,8 @@ from typing import Sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy", "plan_config_from_args",
-           "plan_config_for_budgets", "plan_inputs_in_scene_frame"]
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy",
+           "plan_config_from_args", "plan_config_for_budgets", "plan_inputs_in_scene_frame", "check_cluster_answers"]
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -58,6 +58,15 @@ def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None,
         estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
     check_run_size(estimate, force=force, what="run size, a first guess before discretizing")
     return config
+
+
+def check_cluster_answers(args: argparse.Namespace) -> None:
+    """``--cluster tcp://...``: a Dask scheduler must answer there (connect and handshake within
+    seconds, :func:`markerplace.runtime.cluster.check_scheduler`) before the scene is loaded."""
+    if getattr(args, "cluster", None):
+        from ..runtime.cluster import check_scheduler
+
+        check_scheduler(args.cluster)
 
 
 def parse_level(text: str):
@@ -121,6 +130,9 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
     ``max(ks)`` markers and the smaller budgets are evaluated on their own placements or prefixes.
     ``args`` is not changed.
     """
+    from ..markers import check_tag_budget
+
+    check_tag_budget(max(ks), [])  # placements get ids 0..k-1
     return plan_config_from_args(argparse.Namespace(**{**vars(args), "k": max(ks)}))
 
 

@@ -19,7 +19,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     from ..testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
     from ..testbed.study import StudyPlan, run_study
     from ..validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
-    from .options import plan_config_for_budgets, plan_inputs_in_scene_frame
+    from .options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
 
     ks = parse_int_list(args.k, "--k", EVAL_K)
     config = EvaluateConfig(test=TestSetConfig(tests=args.tests, seed=args.test_seed),
@@ -31,6 +31,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     plan_config = plan_config_for_budgets(args, ks)
     validate(plan_config)
     open_run_folder(args.out, "study", adopt=args.adopt)
+    check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     runs = 1 + len(plan.shifts) + len(plan.scales) + int(plan.detection_off)
     run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, runs * len(ks))

@@ -24,7 +24,6 @@ the wall (that would change the candidates, and re-render).
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 from dataclasses import dataclass, replace
@@ -102,10 +101,9 @@ def load_exclusion(path: str | Path) -> Exclusion:
     if not path.is_file():
         raise UserError(f"--exclude {path}: no such file; give a JSON file of spots and boxes to avoid "
                         "(or the rejected.json that report.html downloads)")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise UserError(f"--exclude {path} is not readable JSON ({err.__class__.__name__}: {err})") from None
+    from ..jsonfile import read_json
+
+    doc = read_json(path, f"--exclude {path}")  # size, UTF-8 and depth guards, one line
     _keys(doc, _TOP_KEYS, "the file", path)
     if doc.get("format", FORMAT) != FORMAT:
         raise UserError(f"--exclude {path}: format {doc['format']!r} is not {FORMAT!r}")
@@ -201,10 +199,12 @@ def previous_markers(out: str | Path, scene: str) -> list | None:
     path = Path(out) / "placement.json"
     if not path.is_file():
         return None
+    from ..jsonfile import read_json
+
     try:
-        doc = json.loads(path.read_text())
+        doc = read_json(path)
         markers = doc.get("markers") if doc.get("scene") == scene else None
-    except (OSError, ValueError, AttributeError):
+    except (UserError, AttributeError):
         return None
     ok = isinstance(markers, list) and all(isinstance(m, dict) and {"position", "order", "tag_id"} <= set(m)
                                            for m in markers)

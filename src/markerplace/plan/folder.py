@@ -9,7 +9,6 @@ file's coordinates; :mod:`markerplace.scene.worldframe`).
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
 from pathlib import Path
@@ -87,10 +86,12 @@ class PlanFolder:
 
 
 def _read_json(path: Path, what: str) -> dict:
+    from ..jsonfile import read_json
+
     try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise UserError(f"{path} is not readable JSON ({err.__class__.__name__}): {what}") from None
+        data = read_json(path)
+    except UserError as err:
+        raise UserError(f"{err}: {what}") from None
     if not isinstance(data, dict):
         raise UserError(f"{path} is not a JSON object: {what}")
     return data

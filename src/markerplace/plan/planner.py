@@ -183,7 +183,7 @@ def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, 
 
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
-            existing: Sequence[Marker] = (), progress: bool = True, executor=None,
+            existing: Sequence[Marker] = (), progress: bool = True, executor=None, k: int | None = None,
             before_observe: Callable[[Discretization], None] | None = None) -> PlanData:
     """Run (or reuse) discretize, observe, similarity and scoring for a scene.
 
@@ -196,6 +196,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
         progress: progress bars on long stages.
         executor: where per-pose work runs (default: one made from ``config.runtime`` for
             this call).
+        k: the most markers the caller will place: refused (:func:`check_k`) right after
+            discretize when the candidates are fewer, before rendering and the look-alike
+            search (None: not checked here).
         before_observe: called with the discretization when the observe stage must run (not
             when its artifact is reused), before anything renders: the run-size check of
             :func:`markerplace.size_guard.measured_size_check`.
@@ -215,6 +218,8 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
              len(disc.locations), config.discretize.num_yaws, N, C)
+    if k is not None:
+        check_k(k, C)  # now, not after rendering and the look-alike search
 
     existing_T = np.array([m.world_from_marker for m in existing]).reshape(-1, 4, 4)
     all_T = np.concatenate([disc.candidate_world_from_marker, existing_T])

@@ -142,6 +142,7 @@ def count_similar(descriptors: np.ndarray, points_world: np.ndarray,
     method = config.method
     if method == "auto":
         method = "exact" if len(descriptors) <= config.exact_max_points else "ivf"
+    log.info("similarity (%s): counting look-alikes of %d points", method, len(descriptors))
     t0 = time.perf_counter()
     if method == "exact":
         out = count_similar_exact(descriptors, points_world, config, progress=progress)

@@ -11,6 +11,7 @@ rules (the ``BAND`` around the threshold, why counts never exceed the exact ones
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Callable
@@ -218,11 +219,15 @@ def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
     probe_lims = np.searchsorted(flat_cells[probes], np.arange(nlist + 1))
     n_threads = min(resolve_threads(cfg.threads), nlist)
 
+    stop = threading.Event()  # set when the caller is interrupted: the threads end after their cell
+
     def part(t: int) -> tuple[np.ndarray, np.ndarray]:
         faiss.omp_set_num_threads(1)  # this thread's OpenMP setting (FAISS and its OpenBLAS)
         part_counts, part_found = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=bool)
         flat = faiss.IndexFlatL2(Y.shape[1])
         for b in range(t, nlist, n_threads):
+            if stop.is_set():
+                break
             m = members[member_lims[b]:member_lims[b + 1]]
             pr = probes[probe_lims[b]:probe_lims[b + 1]]
             if len(m) == 0 or len(pr) == 0:
@@ -243,7 +248,11 @@ def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
 
     found_far = np.zeros(P, dtype=bool)
     with ThreadPoolExecutor(n_threads) as pool:  # FAISS and the kernel release the GIL
-        for part_counts, part_found in pool.map(part, range(n_threads)):
-            counts += part_counts
-            found_far |= part_found
+        try:
+            for part_counts, part_found in pool.map(part, range(n_threads)):
+                counts += part_counts
+                found_far |= part_found
+        except BaseException:  # Ctrl-C: do not wait for every thread to finish its share
+            stop.set()
+            raise
     return found_far

@@ -30,7 +30,9 @@ def write_calibration_report(out: Path, scene_name: str, outcomes: dict, bins: i
 
     out = Path(out)
     summary, arrays, curves = {}, {}, {}
-    lines = [f"# {scene_name}: does the score predict localization? (map images, leave-one-location-out)", "",
+    from .tables import md_text
+
+    lines = [f"# {md_text(scene_name)}: does the score predict localization? (map images, leave-one-location-out)", "",
              "Each map image is localized against the map without the images of its own camera location, "
              "without markers and with each evaluated placement's tags (re-rendered where in view). Samples: "
              "every map image without tags, plus with each placement the images whose score its tags change. "

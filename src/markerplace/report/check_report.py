@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import logging
 from pathlib import Path
 
@@ -44,37 +43,12 @@ differ from the planned ones in the last digits."""
 
 def load_installed(path: str | Path, default_size: float) -> list:
     """Installed markers (user frame) from placement.json's format or a plain list of
-    ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size."""
-    from ..markers import marker_from_json
+    ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size. The checks of
+    :func:`markerplace.markers.load_markers` (JSON guards, integer tag36h11 ids listed once,
+    finite rigid poses)."""
+    from ..markers import load_markers
 
-    path = Path(path)
-    if not path.is_file():
-        raise UserError(f"--installed {str(path)!r}: no such file; give the JSON of the measured tags")
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise UserError(f"--installed {path} is not valid JSON ({err.__class__.__name__}): fix the file") from None
-    entries = data.get("markers") if isinstance(data, dict) else data
-    if not isinstance(entries, list):
-        raise UserError(f"--installed {path} must hold a list of tags or an object with a 'markers' list")
-    out, seen = [], set()
-    for i, e in enumerate(entries):
-        try:
-            if not isinstance(e, dict):
-                raise UserError("not an object with tag_id, position and normal")
-            m = marker_from_json(e, default_size=default_size)
-        except UserError as err:
-            raise UserError(f"--installed {path}, entry {i}: {err}") from None
-        except (ValueError, TypeError) as err:
-            raise UserError(f"--installed {path}, entry {i}: malformed value ({err}); tag_id is an integer, "
-                            "position and normal 3 numbers each") from None
-        if not np.all(np.isfinite(m.world_from_marker)) or np.linalg.norm(m.normal) < 1e-9:
-            raise UserError(f"--installed {path}, entry {i}: tag {m.tag_id} has a non-finite position or a zero normal")
-        if m.tag_id in seen:
-            raise UserError(f"--installed {path}: tag id {m.tag_id} is listed twice; each printed tag hangs once")
-        seen.add(m.tag_id)
-        out.append(m)
-    return out
+    return load_markers(path, "--installed", default_size=default_size)
 
 
 def _warn_off_wall(scene, markers) -> None:

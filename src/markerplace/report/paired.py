@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..testbed.placements import NO_MARKERS, baseline_methods
-from .tables import display_name
+from .tables import md_name
 
 
 def bootstrap_difference(own: np.ndarray, base: np.ndarray, n_boot: int = 2000, seed: int = 0,
@@ -118,7 +118,8 @@ def paired_table(diffs: Sequence[dict], ks: Sequence[int]) -> str:
             found = [d for d in diffs if (d["method"], d["baseline"], d["k"]) == (method, baseline, k)]
             cells.append(format_difference(found[0]) if found else "-")
         runs = max(d["runs"] for d in diffs if (d["method"], d["baseline"]) == (method, baseline))
-        lines.append(f"| {display_name(method)} | {display_name(baseline)} ({runs} run{'s' if runs != 1 else ''}) | "
+        lines.append(f"| {md_name(method)} | {md_name(baseline)} "
+                     f"({runs} run{'s' if runs != 1 else ''}) | "
                      + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -159,7 +160,7 @@ def fixed_broken_table(rows: Sequence[dict], ks: Sequence[int]) -> str:
             r = next((r for r in rows if (r["method"], r["k"]) == (method, k)), None)
             digits = 1 if r is not None and r["runs"] > 1 else 0
             cells.append("-" if r is None else f"+{r['fixed']:.{digits}f} / -{r['broken']:.{digits}f}")
-        lines.append(f"| {display_name(method)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {md_name(method)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -27,6 +27,25 @@ from ..testbed.placements import NO_MARKERS
 
 CSV_COLUMNS = ("scene", "method", "run", "k", "test_set", "threshold", "recall", "n_tests")
 
+_MD_SPECIAL = str.maketrans({c: "\\" + c for c in "\\`*_[]|~"} | {"<": "&lt;", ">": "&gt;", "&": "&amp;",
+                                                                         "\n": " ", "\r": " ", "\t": " "})
+
+
+def md_text(text) -> str:
+    """``text`` (a scene or ``--placements`` folder name, anything a user named) as literal
+    Markdown table-cell text: Markdown's special characters backslash-escaped, ``|`` included,
+    ``<``, ``>`` and ``&`` as HTML entities (Markdown renderers pass raw HTML through), line
+    breaks as spaces. The Markdown counterpart of :func:`markerplace.report.html.esc`."""
+    return str(text).translate(_MD_SPECIAL)
+
+
+def md_name(method: str) -> str:
+    """:func:`display_name` for a Markdown table: a registered method's label as written (ours),
+    any other name (a ``--placements`` folder) through :func:`md_text`."""
+    if method == NO_MARKERS or PLACEMENT_METHODS.get(method) is not None:
+        return display_name(method)
+    return md_text(method)
+
 
 def display_name(method: str) -> str:
     """Paper-style label of a method: ``No markers`` for ``none``, a placement method's ``label``
@@ -96,7 +115,7 @@ def method_table(rows: Sequence[dict], test_set: str, threshold: str, ks: Sequen
              "|---|---|" + "---|" * len(ks)]
     for scene in scenes:
         base = groups.get((scene, test_set, threshold, "none", 0), [])
-        scene_cell = f"{scene} ({format_mean_std(base)})"
+        scene_cell = f"{md_text(scene)} ({format_mean_std(base)})"
         means = {(m, k): np.mean(groups[(scene, test_set, threshold, m, k)])
                  for m in methods for k in ks if groups.get((scene, test_set, threshold, m, k))}
         best = {k: max((v for (m, kk), v in means.items() if kk == k), default=None) for k in ks}
@@ -108,7 +127,7 @@ def method_table(rows: Sequence[dict], test_set: str, threshold: str, ks: Sequen
                 if vals and len(methods) > 1 and np.isclose(np.mean(vals), best[k]):
                     text = f"**{text}**"
                 cells.append(text)
-            lines.append(f"| {scene_cell if i == 0 else ''} | {display_name(m)} | " + " | ".join(cells) + " |")
+            lines.append(f"| {scene_cell if i == 0 else ''} | {md_name(m)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -126,7 +145,8 @@ def thresholds_table(rows: Sequence[dict], thresholds: Sequence[str], ks: Sequen
                 for th in thresholds:
                     base = format_mean_std(groups.get((scene, ts, th, "none", 0), []))
                     cells = [format_mean_std(groups.get((scene, ts, th, m, k), [])) for k in ks]
-                    lines.append(f"| {scene} | {ts} | {display_name(m)} | {th} | {base} | " + " | ".join(cells) + " |")
+                    lines.append(f"| {md_text(scene)} | {ts} | {md_name(m)} | {th} | {base} | "
+                                 + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -159,7 +159,7 @@ def is_fresh(artifact: str | Path, key: str) -> bool:
         return False
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         log.warning("cache: %s is unreadable; recomputing %s", meta_path, artifact)
         return False
     if not isinstance(meta, dict) or meta.get("key") != key:
@@ -197,7 +197,7 @@ def content_digest(artifact: str | Path) -> str:
     try:
         meta = json.loads(_meta_path(artifact).read_text())
         stored = {k: meta[k] for k in ("size", "sha256", "files") if k in meta}
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, RecursionError):
         stored = {}
     return hash_of(stored or artifact_checksum(artifact))
 
@@ -206,7 +206,7 @@ def recorded_upstream(artifact: str | Path) -> dict:
     """The ``upstream`` digests ``artifact``'s meta file records ({} when none)."""
     try:
         up = json.loads(_meta_path(Path(artifact)).read_text()).get("upstream", {})
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError, RecursionError):
         return {}
     return up if isinstance(up, dict) else {}
 

@@ -16,18 +16,26 @@ Backends (:func:`make_executor`):
 
 Results do not depend on the backend: every item is computed the same way, and the caller
 puts results back in item order.
+
+Stopping: a ``map`` that is left before its last result (Ctrl-C, SIGTERM, an error in the
+caller) marks the executor as aborted, and :meth:`Executor.close` then stops the work instead of
+waiting for it: the process pool is terminated (its workers get SIGTERM), the Dask futures are
+cancelled and a ``LocalCluster`` is closed with short timeouts. Workers of either kind never see
+SIGINT (:mod:`markerplace.runtime.workers`, :mod:`markerplace.runtime.interrupt`).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
 from ..errors import UserError
-from .workers import THREAD_ENV, default_workers, single_threaded_libraries, spawn_pool
+from .cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
+from .workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 
@@ -122,13 +130,24 @@ def _batches(items: Sequence, size: int) -> list[list[tuple[int, Any]]]:
 
 
 class Executor:
-    """Runs ``fn(state, item)`` over items; see the module docstring."""
+    """Runs ``fn(state, item)`` over items; see the module docstring.
+
+    Backends implement :meth:`_map`; :meth:`map` counts the maps not run to their end, so
+    :meth:`close` knows whether to wait for the work or to stop it (:attr:`aborted`).
+    """
 
     name = "executor"
     workers = 1
 
     def __init__(self, batch: int = 0):
         self.batch = batch
+        self._aborted = False
+        self._unfinished = 0
+
+    @property
+    def aborted(self) -> bool:
+        """A map was left before its last result (or the ``with`` block raised): stop, do not wait."""
+        return self._aborted or self._unfinished > 0
 
     def batch_size(self, n: int) -> int:
         if self.batch > 0:
@@ -137,6 +156,11 @@ class Executor:
 
     def map(self, fn: Callable, items: Sequence, job: WorkerJob) -> Iterator[tuple[int, Any]]:
         """Yield ``(index, fn(state, items[index]))`` for every item, in completion order."""
+        self._unfinished += 1
+        yield from self._map(fn, items, job)
+        self._unfinished -= 1  # not reached when the caller stops early (an exception, Ctrl-C)
+
+    def _map(self, fn: Callable, items: Sequence, job: WorkerJob) -> Iterator[tuple[int, Any]]:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -145,7 +169,9 @@ class Executor:
     def __enter__(self) -> "Executor":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            self._aborted = True
         self.close()
 
 
@@ -154,7 +180,7 @@ class InProcessExecutor(Executor):
 
     name = "in-process"
 
-    def map(self, fn, items, job):
+    def _map(self, fn, items, job):
         state = _state(job)
         for i, item in enumerate(items):
             yield i, fn(state, item)
@@ -179,20 +205,34 @@ class PoolExecutor(Executor):
             self._pools[job.key] = (ctx, ctx.__enter__())
         return self._pools[job.key][1]
 
-    def map(self, fn, items, job):
+    def _map(self, fn, items, job):
         pool = self._pool(job)
         tasks = [(job, fn, b) for b in _batches(items, self.batch_size(len(items)))]
         for results in pool.imap_unordered(_pool_run, tasks):
             yield from results
 
     def close(self) -> None:
+        """Join the pools, or terminate them after an aborted map (see the module docstring)."""
         pools, self._pools = self._pools, {}
+        abort = self.aborted
         for ctx, _ in pools.values():
-            ctx.__exit__(None, None, None)
+            if abort:  # terminate: SIGTERM to the workers, their unfinished tasks dropped
+                ctx.__exit__(KeyboardInterrupt, KeyboardInterrupt(), None)
+            else:
+                ctx.__exit__(None, None, None)
+
+
+CLOSE_TIMEOUT_S = 1.0
+"""Seconds the Dask client and a ``LocalCluster`` get to close after an aborted map."""
 
 
 class DaskExecutor(Executor):
-    """Tasks on a Dask distributed cluster (an existing scheduler or a ``LocalCluster``)."""
+    """Tasks on a Dask distributed cluster (an existing scheduler or a ``LocalCluster``).
+
+    The address is checked first (:func:`check_scheduler`: the scheme, a connect and
+    handshake timeout); the cluster's event-loop thread and a ``LocalCluster``'s worker
+    processes start with SIGINT blocked (:func:`~markerplace.runtime.workers.children_without_sigint`).
+    """
 
     name = "dask"
 
@@ -204,45 +244,81 @@ class DaskExecutor(Executor):
         except ImportError:  # pragma: no cover - dependency declared
             raise UserError("--cluster needs dask[distributed]: pip install 'dask[distributed]'") from None
         self._cluster = None
-        if address.startswith("local:"):
-            try:
-                n = int(address.split(":", 1)[1])
-            except ValueError:
-                raise UserError(f"--cluster {address!r}: give local:N with N workers, e.g. local:2") from None
-            if n < 1:
-                raise UserError(f"--cluster {address!r}: N must be at least 1")
-            logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger("markerplace").level))
-            env = {k: "1" for k in THREAD_ENV}
-            with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                             dashboard_address=":0")
-            self.client = Client(self._cluster)
-        else:
-            try:
-                self.client = Client(address, timeout="10s")
-            except OSError as err:
-                raise UserError(f"--cluster {address}: cannot reach the Dask scheduler ({err}); start one with "
-                                "`dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`") from None
-        info = self.client.scheduler_info()
+        self.client = None
+        kind, n, _ = parse_cluster(address)
+        timeouts = {"distributed.comm.timeouts.connect": f"{SCHEDULER_TIMEOUT_S:g}s"}
+        try:
+            if kind == "local":
+                logging.getLogger("distributed").setLevel(max(logging.WARNING,
+                                                              logging.getLogger("markerplace").level))
+                env = {k: "1" for k in THREAD_ENV}
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), children_without_sigint():
+                    self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                 dashboard_address=":0")
+                    self.client = Client(self._cluster)
+            else:
+                check_scheduler(address)
+                try:
+                    with dask.config.set(timeouts), children_without_sigint():
+                        self.client = Client(address, timeout=f"{2 * SCHEDULER_TIMEOUT_S:g}s")
+                except Exception as err:  # a scheduler that went away, a version clash, ...
+                    reason = " ".join(str(err).split())[:200] or type(err).__name__
+                    raise UserError(f"--cluster {address}: cannot use the Dask scheduler ({reason})") from None
+            info = self.client.scheduler_info()
+        except BaseException:
+            self._aborted = True
+            self.close()
+            raise
         self.workers = max(1, sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()))
         log.info("dask: %d worker thread(s) at %s", self.workers, self.client.scheduler.address)
 
-    def map(self, fn, items, job):
+    def _map(self, fn, items, job):
         from distributed import as_completed
 
         futures = [self.client.submit(_run_batch, job, fn, b, pure=False)
                    for b in _batches(items, self.batch_size(len(items)))]
-        for fut in as_completed(futures):
+        for fut in as_completed(futures):  # left early: close() closes the client, the scheduler drops its tasks
             yield from fut.result()
 
     def close(self) -> None:
-        try:
-            self.client.run(_close_states)
-        except Exception:  # pragma: no cover - teardown
-            log.debug("closing dask worker states failed", exc_info=True)
-        self.client.close()
+        """Close the worker states, the client and a ``LocalCluster``; after an aborted map
+        quickly (no state closing, short timeouts, the cluster's shutdown chatter silenced)."""
+        abort = self.aborted
+        timeout = CLOSE_TIMEOUT_S if abort else None
+        if abort:
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            self._stop_local_workers()
+        if self.client is not None:
+            if not abort:
+                try:
+                    self.client.run(_close_states)
+                except Exception:  # pragma: no cover - teardown
+                    log.debug("closing dask worker states failed", exc_info=True)
+            try:
+                self.client.close(timeout=timeout)
+            except Exception:  # pragma: no cover - teardown
+                log.debug("closing the dask client failed", exc_info=True)
+            self.client = None
         if self._cluster is not None:
-            self._cluster.close()
+            try:
+                self._cluster.close(timeout=timeout)
+            except Exception:  # pragma: no cover - teardown
+                log.debug("closing the dask cluster failed", exc_info=True)
+            self._cluster = None
+
+    def _stop_local_workers(self) -> None:
+        """SIGTERM to a ``LocalCluster``'s worker processes: they stop at once and silently,
+        instead of logging the cancellation of the tasks they were running."""
+        import signal
+
+        workers = getattr(self._cluster, "workers", None) or {}
+        for nanny in list(workers.values()):
+            pid = getattr(getattr(getattr(nanny, "process", None), "process", None), "pid", None)
+            if pid:
+                try:
+                    os.kill(pid, signal.SIGTERM)
+                except OSError:
+                    pass
 
 
 def make_executor(config: RuntimeConfig = RuntimeConfig()) -> Executor:

@@ -17,7 +17,6 @@ and :func:`~markerplace.scan.frames.open_frameset` for either layout) and
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass
@@ -127,13 +126,12 @@ def read_intrinsics(path: Path, default_depth_scale: float) -> tuple[Intrinsics,
     Returns:
         (intrinsics, depth units per metre).
     """
+    from ..jsonfile import read_json
+
     path = Path(path)
     if not path.is_file():
         raise UserError(f"intrinsics file {path} not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise UserError(f"{path}: not valid JSON ({err})") from None
+    data = read_json(path, f"intrinsics file {path}")
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy")
     missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy") if k not in data]

@@ -45,6 +45,7 @@ import numpy as np
 from ..errors import UserError
 from .worldframe import OFFSET_KEY
 from . import sanity
+from .mesh_text import decode_text, original_names
 from .transparency import material_transparency, read_gltf_json
 from .types import MeshPart, Scene
 
@@ -96,8 +97,13 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
             f"{path}: unknown scene format {ext or '(no extension)'!r}; supported: "
             f"{', '.join(SUPPORTED_EXTENSIONS)} or a built-in name (see `markerplace scene list`)"
         )
+    if path.is_dir():
+        raise UserError(f"{path} is a folder, not a mesh file; give the model file inside it "
+                        f"({', '.join(SUPPORTED_EXTENSIONS)})")
     if not path.is_file():
         raise UserError(f"{path}: no such file; give a mesh file ({', '.join(SUPPORTED_EXTENSIONS)}) or a built-in name")
+    if path.stat().st_size == 0:
+        raise UserError(f"{path} is empty (0 bytes): the export or copy did not finish; export the model again")
     scale = 1.0 if unit_scale is None else float(unit_scale)
     if not np.isfinite(scale) or scale <= 0:
         raise UserError(f"--unit-scale {unit_scale!r} must be a positive number (e.g. 0.01 for centimetres)")
@@ -122,14 +128,55 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     return scene
 
 
+def _resolver(path: Path):
+    """trimesh's resolver of the files a model names (MTL, textures, glTF buffers), restricted to
+    the model's folder as trimesh's own, but: a name outside the folder is recorded in
+    ``.outside`` and treated as missing (trimesh's message about its own API is never shown), MTL
+    text is decoded by :func:`decode_text` and handed on as UTF-8, and a name from Latin-1 text is
+    also looked up by its original bytes."""
+    from trimesh.resolvers import FilePathResolver
+
+    class Resolver(FilePathResolver):
+        outside: list[str]
+
+        def get(self, name: str):
+            data = None
+            for candidate in original_names(name):
+                try:
+                    data = super().get(candidate)
+                    break
+                except ValueError:  # escapes the folder
+                    if name not in self.outside:
+                        self.outside.append(name)
+                except FileNotFoundError:
+                    continue
+            if data is None:
+                raise FileNotFoundError(name)
+            if name.lower().endswith(".mtl"):
+                data = decode_text(data).encode("utf-8")
+            return data
+
+    r = Resolver(str(path))
+    r.outside = []
+    return r
+
+
 def _read_instances(path: Path, ext: str) -> list[tuple]:
     """Every triangle-mesh instance of the file's scene graph: (name, trimesh.Trimesh, (4, 4)
     file_from_mesh, names): ``names`` as :attr:`MeshPart.names` (see the module docstring)."""
+    import io
+
     import trimesh
 
     fmt = _FORMAT_NAMES[ext]
+    resolver = _resolver(path)
     try:
-        loaded = trimesh.load(str(path), force="scene", process=False)
+        if ext == ".obj":  # decoded here, with its MTL files, by one rule
+            text = decode_text(path.read_bytes())
+            loaded = trimesh.load(io.BytesIO(text.encode("utf-8")), file_type="obj", resolver=resolver,
+                                  force="scene", process=False)
+        else:
+            loaded = trimesh.load(str(path), file_type=ext[1:], resolver=resolver, force="scene", process=False)
         if not isinstance(loaded, trimesh.Scene):
             loaded = trimesh.Scene(loaded)
         parents = loaded.graph.transforms.parents
@@ -149,8 +196,15 @@ def _read_instances(path: Path, ext: str) -> list[tuple]:
                 out.append((str(geom_name), mesh, np.asarray(transform, dtype=np.float64),
                             tuple(dict.fromkeys(str(n) for n in names))))
     except Exception as err:  # trimesh raises many kinds of errors on corrupt input
+        if resolver.outside:
+            raise UserError(f"could not read {path}: it needs {', '.join(resolver.outside[:3])}, outside the model's "
+                            "folder, which is not read; copy the file(s) next to the model and fix the reference") \
+                from None
         reason = " ".join(str(err).split())[:200] or type(err).__name__
         raise UserError(f"could not read {path}: {reason}; check the file is a valid {fmt} file") from None
+    if resolver.outside:
+        sanity.warn_once("%s: file(s) outside the model's folder are not read: %s; copy them next to the model "
+                         "and fix the reference", path, ", ".join(resolver.outside[:5]))
     return out
 
 

@@ -23,6 +23,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..errors import UserError
+from .mesh_text import decode_text, original_names
 
 log = logging.getLogger("markerplace.scene.loader")
 
@@ -237,11 +238,11 @@ def missing_textures(path: Path) -> list[str]:
                 if not mtl.is_file():
                     missing.append(mtl.name)
                     continue
-                for line in mtl.read_text(encoding="utf-8", errors="replace").splitlines():
+                for line in decode_text(mtl.read_bytes()).splitlines():
                     parts = line.strip().split()
                     if parts and parts[0].lower().startswith("map_") and len(parts) > 1:
                         name = parts[-1]
-                        if not (mtl.parent / name).is_file():
+                        if not any((mtl.parent / n).is_file() for n in original_names(name)):
                             missing.append(name)
     except (OSError, ValueError, AttributeError):
         return []
@@ -250,12 +251,12 @@ def missing_textures(path: Path) -> list[str]:
 
 def _obj_material_libraries(path: Path) -> list[Path]:
     libs = []
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            if line.startswith("mtllib"):
-                name = line[len("mtllib"):].strip()
-                if name:
-                    libs.append(path.parent / name)
+    for line in decode_text(path.read_bytes()).splitlines():
+        if line.startswith("mtllib"):
+            name = line[len("mtllib"):].strip()
+            if name:
+                found = [path.parent / n for n in original_names(name) if (path.parent / n).is_file()]
+                libs.append(found[0] if found else path.parent / name)
     return libs
 
 

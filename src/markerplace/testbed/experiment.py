@@ -118,7 +118,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
 
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
-        data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor)
+        data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
+                       k=max(config.study.ks))
         calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0

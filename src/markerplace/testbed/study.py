@@ -69,7 +69,7 @@ def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress
     from ..plan.planner import place, prepare
 
     k = plan_config.placement.k
-    data = prepare(scene_spec, plan_config, work / "plan", progress=progress)
+    data = prepare(scene_spec, plan_config, work / "plan", progress=progress, k=k)
     out = {f"omp-v{v:g}": place(data, replace(plan_config.placement, method="omp", v=v, k=k), progress=False).markers
            for v in plan.vs}
     if plan.similarity_off:
