@@ -18,9 +18,10 @@ def test_builtin_renders_non_degenerate_and_deterministic(name):
         a = r.render(pose)
         b = r.render(pose)
     assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
-    # inside a closed interior every pixel hits something at a plausible distance
+    # inside a closed interior nearly every pixel hits something at a plausible distance (a
+    # window of house or apartment shows the sky outside)
     hit = a.depth > 0
-    assert hit.mean() > 0.99
+    assert hit.mean() > 0.95
     assert 0.1 < np.median(a.depth[hit]) < 20.0
     # not a flat colour: textures, shading and several surfaces are visible
     gray = a.rgb.mean(axis=2)

@@ -80,8 +80,10 @@ def test_deliverables_of_a_gltf_scene_have_y_up_maps(tmp_path):
     disc = SimpleNamespace(occupancy=np.zeros((30, 40), np.int8), grid_origin=(-1.0, -0.5), grid_resolution=0.1)
     write_deliverables(tmp_path, [rec], [m], [], disc, "scan.glb", {"up": None}, "letter")
     names = sorted(p.name for p in (tmp_path / "tagmaps").iterdir())
-    assert names == ["apriltag_ros_bundle.yaml", "apriltag_ros_bundle_yup.yaml", "tagslam_tags.yaml",
-                     "tagslam_tags_yup.yaml", "wpilib_field_layout.json", "wpilib_field_layout_yup.json"]
+    assert names == ["apriltag_ros_bundle.yaml", "apriltag_ros_bundle_yup.yaml", "ros2_apriltag_params.yaml",
+                     "ros2_apriltag_params_yup.yaml", "ros2_tag_transforms.launch.yaml",
+                     "ros2_tag_transforms_yup.launch.yaml", "tagslam_tags.yaml", "tagslam_tags_yup.yaml",
+                     "wpilib_field_layout.json", "wpilib_field_layout_yup.json"]
     yup = json.loads((tmp_path / "tagmaps" / "wpilib_field_layout_yup.json").read_text())
     tr = yup["tags"][0]["pose"]["translation"]
     assert np.allclose([tr["x"], tr["y"], tr["z"]], [1.0, 1.5, -2.0])  # glTF (x, z-up height, -y)

@@ -35,7 +35,7 @@ import printed_tags
 from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics
 from markerplace.render.renderer import Renderer
-from markerplace.report.pdf import tile_layout
+from markerplace.report.sheets import tile_layout
 from markerplace.scene import load_scene
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene

@@ -207,7 +207,8 @@ def test_every_tags_pdf_page_names_its_tag_and_tile(room_plan):
 
 
 def test_sheets_are_said_before_writing_and_a_warning_offers_alternatives(tmp_path, caplog):
-    from markerplace.report.pdf import sheet_advice, sheet_plan, write_tags_pdf
+    from markerplace.report.pdf import write_tags_pdf
+    from markerplace.report.sheets import sheet_advice, sheet_plan
 
     rec = {"order": 1, "tag_id": 3, "family": "tag36h11", "size": 0.4, "position": [1.0, 2.0, 1.5], "yaw_deg": 90.0}
     recs = [{**rec, "order": i + 1, "tag_id": i} for i in range(20)]

@@ -18,7 +18,7 @@ def test_marker_file_round_trip(tmp_path):
     path.write_text(json.dumps([m.to_json()]))
     (m2,) = load_markers(path)
     assert np.allclose(m2.world_from_marker, m.world_from_marker)
-    assert np.allclose(m2.corners_world()[:, 2], [1.65, 1.65, 1.35, 1.35])
+    assert np.allclose(m2.corners_world()[:, 2], [1.35, 1.35, 1.65, 1.65])  # BL, BR, TR, TL
 
 
 @pytest.mark.parametrize("content, message", [

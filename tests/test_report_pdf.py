@@ -10,7 +10,8 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.render.tags import outer_size
-from markerplace.report.pdf import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout, write_tags_pdf
+from markerplace.report.pdf import write_tags_pdf
+from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout
 from markerplace.report.printable import caption_for
 import printed_tags
 

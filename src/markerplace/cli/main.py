@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
                              "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
                              "placing, so a re-run reuses every cached stage (see docs/cli.md)")
-    from ..report.pdf import PAPER_CHOICES
+    from ..report.sheets import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "

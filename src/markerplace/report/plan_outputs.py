@@ -16,7 +16,7 @@ from ..io_utils import atomic_path, write_json, write_npz
 from ..plan.localizability import entropy
 from .figures import floor_map, per_location_mean
 from .instructions import install_to_frame
-from .pdf import sheet_plan
+from .sheets import sheet_plan
 from .printable import write_tag_sheets
 
 log = logging.getLogger(__name__)
