@@ -174,7 +174,7 @@ SAMPLE_POSES = 16
 """Poses :func:`time_sample` renders (the first one, which warms up SIFT and the GL driver, is not
 timed)."""
 PARALLEL_EFFICIENCY = 0.85
-"""Speed-up of W rendering processes over one, per process (the main process also works)."""
+"""Speed-up of W feature-extracting processes over one, per process."""
 SIMILARITY_EXACT_S_PER_PAIR = 5e-9
 """Exact look-alike search, seconds per pair of points (2 cores; room: 23k points in 2.3 s)."""
 SIMILARITY_IVF_S_PER_POINT = 1.5e-4
@@ -191,55 +191,73 @@ class PoseSample:
     """What a few real poses of the scene cost here (see :func:`time_sample`).
 
     Attributes:
-        seconds_per_pose: render + SIFT + 3D lift of one pose on one core, seconds.
+        render_seconds: rendering one pose (llvmpipe spreads it over the cores itself, so
+            rendering workers share that throughput rather than add to it), seconds.
+        feature_seconds: SIFT and the 3D lift of one pose on one core (this scales with the
+            workers), seconds.
         setup_seconds: loading the scene and starting a renderer (each worker pays it once).
         features_per_pose: SIFT features with a 3D point per pose (the look-alike search's input).
         poses: poses timed.
     """
 
-    seconds_per_pose: float
+    render_seconds: float
+    feature_seconds: float
     setup_seconds: float
     features_per_pose: float
     poses: int
 
+    @property
+    def seconds_per_pose(self) -> float:
+        """Render + features of one pose, seconds."""
+        return self.render_seconds + self.feature_seconds
+
 
 def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSES) -> PoseSample:
     """Render and extract features at ``n`` poses spread over ``world_from_cam`` ((N, 4, 4)) in
-    this process, as a worker of the observe stage does, and time it."""
+    this process, as a worker of the observe stage does (OpenCV on one thread), and time it."""
     import time
 
+    import cv2
     import numpy as np
 
     from .imaging.engine import EngineSpec, ImagingEngine
 
     poses = np.asarray(world_from_cam, float).reshape(-1, 4, 4)
     pick = np.unique(np.linspace(0, len(poses) - 1, max(2, n)).round().astype(int)) if len(poses) else []
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     t0 = time.perf_counter()
     engine = ImagingEngine(EngineSpec(scene_spec, imaging_config, {}))
     try:
         setup = time.perf_counter() - t0
-        times, feats = [], []
+        render, feature, feats = [], [], []
         for i in pick:
             t1 = time.perf_counter()
             res = engine.render(poses[i])
+            t2 = time.perf_counter()
             f = engine.features(res).with_3d_only()
-            times.append(time.perf_counter() - t1)
+            render.append(t2 - t1)
+            feature.append(time.perf_counter() - t2)
             feats.append(len(f.keypoints))
     finally:
         engine.close()
-    timed = times[1:] if len(times) > 1 else times
-    return PoseSample(float(np.mean(timed)) if timed else SECONDS_PER_POSE_CORE, setup,
-                      float(np.mean(feats)) if feats else 0.0, len(timed))
+        cv2.setNumThreads(threads)
+    if len(render) > 1:  # the first pose warms up SIFT and the GL driver
+        render, feature = render[1:], feature[1:]
+    if not render:
+        return PoseSample(SECONDS_PER_POSE_CORE / 2, SECONDS_PER_POSE_CORE / 2, setup, 0.0, 0)
+    return PoseSample(float(np.mean(render)), float(np.mean(feature)), setup, float(np.mean(feats)), len(render))
 
 
 def estimate_plan(sample: PoseSample, poses: int, workers: int, similarity_config, k: int,
                   similarity: bool = True) -> dict[str, float]:
     """Seconds of the remaining stages of a plan from a :class:`PoseSample`: ``observe`` (every
-    worker starts a renderer, then the poses are shared), ``similarity`` (exact or inverted-file
-    search on the expected points, as :func:`markerplace.plan.similarity.count_similar` picks),
-    ``outputs`` (files, report, installer views) and ``total``."""
+    worker starts a renderer; renders share the machine's llvmpipe throughput, features run on
+    ``workers`` processes), ``similarity`` (exact or inverted-file search on the expected
+    points, as :func:`markerplace.plan.similarity.count_similar` picks), ``outputs`` (files,
+    report, installer views) and ``total``."""
     eff = max(1.0, workers * PARALLEL_EFFICIENCY) if workers > 1 else 1.0
-    observe = sample.setup_seconds + poses * sample.seconds_per_pose / eff
+    observe = sample.setup_seconds + poses * (sample.render_seconds + sample.feature_seconds / eff)
     points = poses * sample.features_per_pose
     if not similarity:
         sim = 0.0
@@ -249,42 +267,6 @@ def estimate_plan(sample: PoseSample, poses: int, workers: int, similarity_confi
         sim = SIMILARITY_IVF_S_PER_POINT * points
     outputs = OUTPUT_SECONDS + k * VIEWS_PER_TAG * sample.seconds_per_pose
     return {"observe": observe, "similarity": sim, "outputs": outputs, "total": observe + sim + outputs}
-
-
-def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = False, evaluate_config=None,
-                        extra_placements: int = 0):
-    """The check ``prepare`` runs once the discretization is known and before it renders: a
-    :func:`time_sample` of the scene's own poses, the stage times of :func:`estimate_plan` (plus
-    the evaluation's, for ``evaluate``) logged, and :func:`check_run_size` on them. Returns the
-    callable ``check(disc)``."""
-    from dataclasses import replace
-
-    from .progress import format_duration
-    from .runtime.workers import default_workers
-
-    def check(disc) -> None:
-        N = len(disc.world_from_cam)
-        sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
-        workers = default_workers(plan_config.runtime.workers)
-        stages = estimate_plan(sample, N, workers, plan_config.similarity, k, plan_config.placement.similarity)
-        estimate = estimate_run(scene, plan_config, evaluate_config, extra_placements, poses=N,
-                                seconds_per_pose=sample.seconds_per_pose)
-        evaluation = 0.0
-        if evaluate_config is not None:
-            evaluation = estimate.seconds - estimate_run(scene, plan_config, None, 0, poses=N,
-                                                         seconds_per_pose=sample.seconds_per_pose).seconds
-        elapsed = _seconds_since_start()
-        estimate = replace(estimate, seconds=elapsed + stages["total"] + evaluation)
-        log.info("run size: %d poses; %d of them here took %.0f ms each (%.1f s to start a renderer), so about "
-                 "%s to render and extract features, %s for the look-alikes (%d points), %s for the outputs%s; "
-                 "with the %s so far, about %s in all on %d worker(s) and %s of memory", N, sample.poses,
-                 1000 * sample.seconds_per_pose, sample.setup_seconds, format_duration(stages["observe"]),
-                 format_duration(stages["similarity"]), int(N * sample.features_per_pose),
-                 format_duration(stages["outputs"]), f", {format_duration(evaluation)} to evaluate" if evaluation else "",
-                 format_duration(elapsed), format_duration(estimate.seconds), workers, _gib(estimate.memory_bytes))
-        check_run_size(estimate, force=force, log_ok=False)
-
-    return check
 
 
 def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
