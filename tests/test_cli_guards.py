@@ -299,3 +299,34 @@ def test_size_guard_counts_storeys_of_level_all():
     assert every.storeys == 2 and one.storeys == 1 and every.poses == 2 * one.poses
     assert size_guard.estimate_run(load_scene("tiny"), PlanConfig()).storeys == 1
     assert "x 2 storeys" in every.describe()
+
+
+def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatch, caplog):
+    """After discretizing, the estimate comes from a timed sample of the scene's own poses; a
+    scene whose poses are slow enough to need more than the limit is refused before rendering."""
+    import logging
+
+    from markerplace import size_guard
+    from markerplace.plan.discretize import discretize
+    from markerplace.plan.planner import PlanConfig
+    from markerplace.scene import load_scene
+    from markerplace.scene.spec import SceneSpec
+
+    spec = SceneSpec("tiny", None, None, 0)
+    scene = spec.load()
+    config = PlanConfig()
+    disc = discretize(scene, config.discretize)
+    sample = size_guard.time_sample(spec, disc.world_from_cam, config.imaging, n=4)
+    assert sample.poses == 3 and sample.render_seconds > 0 and sample.feature_seconds > 0
+    assert sample.features_per_pose > 0 and sample.setup_seconds > 0
+    stages = size_guard.estimate_plan(sample, 1000, 2, config.similarity, 5)
+    assert stages["total"] == pytest.approx(stages["observe"] + stages["similarity"] + stages["outputs"])
+    assert stages["observe"] > 1000 * sample.render_seconds  # renders do not get faster with workers
+    caplog.set_level(logging.INFO, logger="markerplace")
+    size_guard.measured_size_check(scene, spec, config, 5)(disc)
+    assert any("run size:" in r.getMessage() and "in all" in r.getMessage() for r in caplog.records)
+    slow = size_guard.PoseSample(1000.0, 1000.0, 1.0, 50.0, 4)  # 2000 s per pose
+    monkeypatch.setattr(size_guard, "time_sample", lambda *a, **k: slow)
+    with pytest.raises(UserError, match="longer than 12 h"):
+        size_guard.measured_size_check(scene, spec, config, 5)(disc)
+    size_guard.measured_size_check(scene, spec, config, 5, force=True)(disc)  # --force: a warning only

@@ -269,6 +269,43 @@ def estimate_plan(sample: PoseSample, poses: int, workers: int, similarity_confi
     return {"observe": observe, "similarity": sim, "outputs": outputs, "total": observe + sim + outputs}
 
 
+def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = False, evaluate_config=None,
+                        extra_placements: int = 0):
+    """The check ``prepare`` runs once the discretization is known and before it renders: a
+    :func:`time_sample` of the scene's own poses, the stage times of :func:`estimate_plan` (plus
+    the evaluation's, for ``evaluate``) logged, and :func:`check_run_size` on them. Returns the
+    callable ``check(disc)``."""
+    from dataclasses import replace
+
+    from .progress import format_duration
+    from .runtime.workers import default_workers
+
+    def check(disc) -> None:
+        N = len(disc.world_from_cam)
+        sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
+        workers = default_workers(plan_config.runtime.workers)
+        stages = estimate_plan(sample, N, workers, plan_config.similarity, k, plan_config.placement.similarity)
+        estimate = estimate_run(scene, plan_config, evaluate_config, extra_placements, poses=N,
+                                seconds_per_pose=sample.seconds_per_pose)
+        evaluation = 0.0
+        if evaluate_config is not None:
+            evaluation = estimate.seconds - estimate_run(scene, plan_config, None, 0, poses=N,
+                                                         seconds_per_pose=sample.seconds_per_pose).seconds
+        elapsed = _seconds_since_start()
+        estimate = replace(estimate, seconds=elapsed + stages["total"] + evaluation)
+        log.info("run size: %d poses; %d of them here took %.0f ms each to render and extract features (%.1f s to "
+                 "start a renderer), so about "
+                 "%s to render and extract features, %s for the look-alikes (%d points), %s for the outputs%s; "
+                 "with the %s so far, about %s in all on %d worker(s) and %s of memory", N, sample.poses,
+                 1000 * sample.seconds_per_pose, sample.setup_seconds, format_duration(stages["observe"]),
+                 format_duration(stages["similarity"]), int(N * sample.features_per_pose),
+                 format_duration(stages["outputs"]), f", {format_duration(evaluation)} to evaluate" if evaluation else "",
+                 format_duration(elapsed), format_duration(estimate.seconds), workers, _gib(estimate.memory_bytes))
+        check_run_size(estimate, force=force, log_ok=False)
+
+    return check
+
+
 def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
                 memory_bytes: float | None = None, factor: float = 1.0) -> list[str]:
     """Why ``estimate`` is over ``factor`` times ``limits`` (empty when it is not), e.g. "longer
