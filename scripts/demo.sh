@@ -18,8 +18,8 @@ $MP render office --pose 11.0,2.5,1.5,0 --out "$OUT/office_view2" >/dev/null
 $MP render office --out "$OUT/office_view3" >/dev/null
 echo "wrote $OUT/office_view{1,2,3}_rgb.png (and _depth.npy, _normal.png)"
 
-echo "== OMP plan: 10 markers in '$SCENE'"
-$MP plan "$SCENE" -k 10 --out "$OUT/plan_$SCENE"
+echo "== OMP plan: 6 markers in '$SCENE' (it has 11 spots a person would use)"
+$MP plan "$SCENE" -k 6 --out "$OUT/plan_$SCENE"
 $MP render "$SCENE" --markers "$OUT/plan_$SCENE/placement.json" --out "$OUT/${SCENE}_with_markers" >/dev/null
 echo "see $OUT/plan_$SCENE/report.html (open it in a browser: maps, and each tag with the view an installer has), placement.csv"
 
@@ -30,7 +30,7 @@ echo "see $OUT/plan_tiny_scan/placement.png (planned on the fused scan, not the 
 
 if [ "${DEMO_SKIP_EVAL:-0}" != "1" ]; then
   echo "== short evaluation: OMP vs no markers vs 3 random and 3 uniform placements (paired 95 % intervals)"
-  $MP evaluate "$SCENE" --out "$OUT/eval_$SCENE" --tests 400 --test-sets weighted --runs 3 --k 5,10 \
+  $MP evaluate "$SCENE" --out "$OUT/eval_$SCENE" --tests 400 --test-sets weighted --runs 3 --k 3,6 \
     --methods none,omp,random,uniform
   echo "see $OUT/eval_$SCENE/report.html (recall tables, recall vs k, test images the plan fixes and breaks), tables.md"
 fi
