@@ -185,3 +185,48 @@ def test_interrupt_helper_reports_what_it_saw():
     r = interrupt_cli(["scene", "list"], "never printed", start_timeout=60)
     assert not r.reached and r.problems() == ["the log never showed the stage"]
     assert json.dumps(r.returncode) == "0"
+
+
+def test_a_swallowed_interrupt_still_stops_the_command(monkeypatch, capsys):
+    """The signal's KeyboardInterrupt can be raised where Python swallows it (Dask's gc callback,
+    a destructor): the command still ends with 130 and the one line, and no traceback of it is
+    printed."""
+    import importlib
+    import signal
+
+    cli_main = importlib.import_module("markerplace.cli.main")  # the module (markerplace.cli.main is also a function)
+
+    def command(args):
+        handler = signal.getsignal(signal.SIGINT)  # the guard's handler, as the signal would run it
+
+        class Swallows:
+            def __del__(self):
+                handler(signal.SIGINT, None)
+
+        Swallows()  # "Exception ignored in ...": the KeyboardInterrupt goes nowhere
+        return 0
+
+    monkeypatch.setattr(cli_main, "cmd_scene_list", command)
+    assert cli_main.main(["scene", "list"]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "Exception ignored" not in err
+    assert err.strip().splitlines() == [err.strip().splitlines()[-1]] and "interrupted" in err
+
+
+def test_raise_if_stopping_raises_the_remembered_signal_again():
+    import signal
+
+    from markerplace.runtime import interrupt
+
+    with interrupt.InterruptGuard() as guard:
+        interrupt.raise_if_stopping()  # nothing received: nothing raised
+
+        class Swallows:
+            def __del__(self):
+                guard._handler(signal.SIGTERM, None)
+
+        Swallows()
+        with pytest.raises(interrupt.Terminated):
+            interrupt.raise_if_stopping()
+        assert guard.stopped(interrupt.Terminated()) == 143
+    interrupt.raise_if_stopping()  # the guard is gone: nothing remembered

@@ -18,6 +18,8 @@ import sys
 import time
 from typing import Iterable, Iterator, TypeVar
 
+from .runtime.interrupt import raise_if_stopping
+
 log = logging.getLogger("markerplace.progress")
 
 __all__ = ["progress_bar", "track", "LogProgress", "LOG_INTERVAL_S", "format_duration"]
@@ -65,6 +67,7 @@ class LogProgress:
 
     def update(self, n: int = 1) -> None:
         """Count ``n`` more done items; log a line when ``interval_s`` has passed since the last."""
+        raise_if_stopping()
         self.n += int(n)
         now = self._clock()
         if not self._warm:  # the rate starts at the first finished item (see the module docstring)
@@ -135,6 +138,7 @@ def _terminal_bar(total: int, desc: str, unit: str, initial: int):
         _warm = False
 
         def update(self, n=1):
+            raise_if_stopping()
             if self._warm:
                 return super().update(n)
             self._warm = True

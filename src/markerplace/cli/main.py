@@ -281,7 +281,10 @@ def main(argv: list[str] | None = None) -> int:
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
             try:
-                return int(func(args) or 0)
+                code = int(func(args) or 0)
+                if guard.signum is not None:  # a signal whose exception was swallowed on the way
+                    return guard.stopped(KeyboardInterrupt())
+                return code
             finally:
                 from ..runtime.run_folder import close_all
 

@@ -10,6 +10,12 @@ What happens then:
   terminate their process pools or close their Dask cluster
   (:mod:`markerplace.runtime.executor`), stages keep the parts they finished. Further signals
   while stopping are ignored (a second Ctrl-C cannot interrupt the clean-up half-way).
+* The raised exception can be swallowed where Python cannot pass it on (a ``gc`` callback of
+  Dask, a destructor: "Exception ignored in ..."). So the signal is also remembered:
+  :func:`raise_if_stopping` raises it again at the next progress update or stage, and a command
+  that returns normally after a signal still ends with the signal's exit code and message; the
+  swallowed exception itself is not printed (``sys.unraisablehook``: only our own
+  ``KeyboardInterrupt`` is kept quiet, anything else is reported as usual).
 * After a signal, :func:`stop_children` ends whatever child processes are left (terminate, then
   kill after ``CHILD_WAIT_S``); multiprocessing's resource tracker is left alone: it ignores signals and
   exits by itself when this process is gone.
@@ -34,8 +40,8 @@ import time
 from contextlib import contextmanager
 from typing import Iterator
 
-__all__ = ["Terminated", "InterruptGuard", "deferred", "stop_children", "exit_code", "resume_message", "GRACE_S",
-           "CHILD_WAIT_S"]
+__all__ = ["Terminated", "InterruptGuard", "deferred", "raise_if_stopping", "stop_children", "exit_code",
+           "resume_message", "GRACE_S", "CHILD_WAIT_S"]
 
 GRACE_S = 3.0
 """Seconds the main thread has after the first signal to clean up before the watchdog ends the process."""
@@ -51,6 +57,15 @@ class Terminated(KeyboardInterrupt):
 
 _deferring = 0  # depth of deferred() blocks (main thread)
 _pending: list[int] = []  # the signal that arrived inside one
+_received: list[int] = []  # the signal the active guard received (empty: none)
+
+
+def raise_if_stopping() -> None:
+    """In the main thread, raise the signal the command received again (its first exception may
+    have been swallowed, see the module docstring); nothing when none was received, inside a
+    :func:`deferred` block, or in another thread."""
+    if _received and not _deferring and threading.current_thread() is threading.main_thread():
+        raise Terminated() if _received[0] == signal.SIGTERM else KeyboardInterrupt()
 
 
 @contextmanager
@@ -144,6 +159,7 @@ class InterruptGuard:
         if self.signum is not None:
             return  # already stopping: the watchdog enforces the deadline
         self.signum = signum
+        _received[:] = [signum]
         if _deferring:  # raised when the deferred() block ends
             _pending.append(signum)
             return
@@ -165,14 +181,24 @@ class InterruptGuard:
                 continue
             self._old[sig] = old
             signal.signal(sig, self._handler)
+        self._old_unraisable = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         self._watchdog = threading.Thread(target=self._watch, name="markerplace-interrupt-watchdog", daemon=True)
         self._watchdog.start()
         return self
+
+    def _unraisable(self, info) -> None:
+        """Quiet for the signal's own exception swallowed in a callback; the usual report else."""
+        if self.signum is not None and isinstance(info.exc_value, KeyboardInterrupt):
+            return
+        self._old_unraisable(info)
 
     def __exit__(self, *exc) -> None:
         if not self._on:
             return
         self._on = InterruptGuard._active = False
+        _received.clear()
+        sys.unraisablehook = self._old_unraisable
         for sig, old in self._old.items():
             signal.signal(sig, old)
         signal.set_wakeup_fd(self._old_wakeup)
@@ -202,6 +228,7 @@ class InterruptGuard:
         signalled = self.signum is not None
         signum = self.signum or (signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT)
         self.signum = signum  # further signals are ignored from here on
+        _received.clear()  # the clean-up after it must not be cut again
         self._announce(signum)
         if signalled:  # not for a KeyboardInterrupt raised by code: the caller's own children are not ours
             stop_children(self.child_wait_s)

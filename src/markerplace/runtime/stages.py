@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Callable, Sequence, TypeVar
 
 from . import cache
+from .interrupt import raise_if_stopping
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +49,7 @@ def cached(name: str, path: str | Path, key: str, compute: Callable[[], T], save
         meta: extra fields recorded in the artifact's ``.meta.json``.
     """
     path = Path(path)
+    raise_if_stopping()
     t0 = time.perf_counter()
     result = cache.load_fresh(path, key, load)
     if result is not None and upstream:
