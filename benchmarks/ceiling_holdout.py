@@ -30,11 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.plan import discretization
+from markerplace.plan.discretize.stage import artifact as discretization
 from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
-from markerplace.testbed.placements import NO_MARKERS
+from markerplace.testbed.marker_sets import NO_MARKERS
 from markerplace.testbed.poses import TestPoses
-from markerplace.testbed.predictions import load_prediction
+from markerplace.testbed.prediction_store import load_prediction
 
 
 def cached_single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:

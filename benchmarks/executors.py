@@ -35,7 +35,7 @@ def _build(spec):
 
 
 def main(argv=None) -> None:
-    from markerplace.plan.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
     from markerplace.plan.observe import observe
     from markerplace.plan.planner import PlanConfig, geometric_visibility
     from markerplace.runtime.executor import RuntimeConfig, WorkerJob, make_executor

@@ -112,7 +112,7 @@ def stage_windows(timings: dict, t0: float, t1: float) -> dict[str, tuple[float,
 
 def plan_end_to_end(args, run_dir: Path):
     """Plan ``args.scene`` in ``run_dir``; returns (data, placement, sampler, windows, config)."""
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
@@ -204,7 +204,7 @@ def calibrate(args, data, config, scratch: Path) -> dict:
 def project_spacing(args) -> dict:
     """Discretize ``args.scene`` at ``args.project_spacing`` (timed): how many poses a finer
     lattice has, to project its observe stage from the measured per-pose cost."""
-    from markerplace.plan.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
     from markerplace.scene import load_scene
 
     t = time.perf_counter()
@@ -231,7 +231,7 @@ def main(argv=None) -> None:
         logging.getLogger(name).setLevel(logging.WARNING)
 
     from markerplace.scene import load_scene
-    from markerplace.scene.catalogue import get_layout
+    from markerplace.scene.builtin.catalogue import get_layout
 
     scene = load_scene(args.scene)
     emit("scene", args.scene)

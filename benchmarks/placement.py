@@ -30,14 +30,14 @@ import numba
 import numpy as np
 
 from markerplace.geometry import Intrinsics, world_from_cam_poses, world_from_marker_pose
-from markerplace.plan.localizability import (
+from markerplace.plan.score.localizability import (
     NoiseConfig,
     entropy,
     marker_visibility,
     pose_information,
 )
-from markerplace.plan.marker_models import get_marker_model
-from markerplace.plan.placement import MarkerCoverage, omp_greedy
+from markerplace.plan.score.marker_models import get_marker_model
+from markerplace.plan.place.greedy import MarkerCoverage, omp_greedy
 
 GOAL_SPEEDUP = 1000.0
 GOAL_LAZY_S = 5.0

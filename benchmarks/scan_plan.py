@@ -102,7 +102,7 @@ class MemorySampler:
 
 
 def part_a(args) -> None:
-    from markerplace.plan.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
     from markerplace.scene import load_scene
 
     for name in args.scenes.split(","):

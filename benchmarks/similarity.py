@@ -3,7 +3,7 @@
 Prints ``name: value`` lines. For each input, three implementations count n_p (cosine > 0.9,
 3D distance > 2 m):
 
-* ``faiss``: ``markerplace.plan.similarity.count_similar`` (``auto``: exact ``IndexFlatIP`` up to
+* ``faiss``: ``markerplace.plan.similarity.stage.count_similar`` (``auto``: exact ``IndexFlatIP`` up to
   50k points, else the PCA-64 ``IndexIVFFlat`` search);
 * ``ref``: the hand-written PCA + inverted file it replaced, kept in
   ``benchmarks/similarity_reference.py`` (``auto``: exact blocks up to 30k points, else approx);
@@ -56,9 +56,9 @@ if ARGS is not None and ARGS.threads:  # before numpy loads its BLAS
 
 import numpy as np  # noqa: E402
 
-from markerplace.plan.similarity import (SimilarityConfig, count_similar, count_similar_exact,  # noqa: E402
+from markerplace.plan.similarity.stage import (SimilarityConfig, count_similar, count_similar_exact,  # noqa: E402
                                          count_similar_ivf)
-from markerplace.plan.similarity_quality import measure_error, synthetic_descriptors  # noqa: E402
+from markerplace.plan.similarity.quality import measure_error, synthetic_descriptors  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from similarity_reference import ReferenceConfig, count_similar_reference  # noqa: E402

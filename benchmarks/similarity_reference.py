@@ -1,6 +1,6 @@
 """The look-alike search before FAISS (markerplace <= the FAISS port): benchmark reference only.
 
-This is the hand-written implementation that ``markerplace.plan.similarity`` used until it moved
+This is the hand-written implementation that ``markerplace.plan.similarity.stage`` used until it moved
 to FAISS, kept verbatim (renamed ``ReferenceConfig`` / ``count_similar_reference``) so that
 ``benchmarks/similarity.py`` can time "today's code" against the FAISS path on the same input.
 It is not part of the package and nothing in ``src/`` imports it.

@@ -7,7 +7,7 @@ from markerplace.geometry import Intrinsics
 from markerplace.render.renderer import Renderer
 from markerplace.render.views import default_pose
 from markerplace.scene import load_scene
-from markerplace.scene.catalogue import builtin_names
+from markerplace.scene.builtin.catalogue import builtin_names
 
 
 @pytest.mark.parametrize("name", builtin_names())

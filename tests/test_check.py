@@ -72,7 +72,7 @@ def test_installed_as_planned_loses_nothing(plan, tmp_path, capsys):
 
 
 def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
-    from markerplace.plan.discretization import load
+    from markerplace.plan.discretize.artifact import load
 
     ms = markers_of(plan)
     a, b, c, d = ms

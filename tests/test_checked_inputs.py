@@ -350,7 +350,7 @@ def test_files_outside_the_model_folder_are_named_without_trimesh_api(tmp_path, 
 
 
 def test_tables_escape_names_the_user_chose():
-    from markerplace.report.tables import method_table
+    from markerplace.testbed.reporting.tables import method_table
 
     rows = [dict(scene="tiny|x", method=m, run=0, k=k, test_set="weighted", threshold="5cm/5deg", recall=0.5,
                  n_tests=10) for m, k in (("none", 0), ("omp", 2), ("<b>a|b</b>_c", 2))]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from markerplace.cli.main import join_signed_values, main
-from markerplace.io_utils import JSON_DIGITS, clean_array, clean_numbers, fixed, write_json
+from markerplace.runtime.atomic_io import JSON_DIGITS, clean_array, clean_numbers, fixed, write_json
 
 LONG_FLOAT = re.compile(r"-?\d+\.\d{13,}")
 """More decimals than the floats written here can have (all are above 0.1 or zero)."""

@@ -17,7 +17,7 @@ try:
     from markerplace import validation
 except ImportError:  # a version without it: its tests must fail, the CLI tests still run
     validation = None
-from markerplace import size_guard
+from markerplace.pipelines import size_guard
 from markerplace.errors import UserError
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
@@ -253,7 +253,7 @@ def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
 
     from dataclasses import replace
 
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.planner import PlanConfig
     from markerplace.scene import load_scene
 
@@ -289,7 +289,7 @@ def test_force_flag_is_accepted_by_plan_and_evaluate():
 def test_size_guard_counts_storeys_of_level_all():
     from dataclasses import replace
 
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.planner import PlanConfig
     from markerplace.scene import load_scene
 
@@ -306,8 +306,8 @@ def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatc
     scene whose poses are slow enough to need more than the limit is refused before rendering."""
     import logging
 
-    from markerplace import size_guard
-    from markerplace.plan.discretize import discretize
+    from markerplace.pipelines import size_guard
+    from markerplace.plan.discretize.stage import discretize
     from markerplace.plan.planner import PlanConfig
     from markerplace.scene import load_scene
     from markerplace.scene.spec import SceneSpec

@@ -144,7 +144,7 @@ def test_expected_recall_plan_is_calibrated_on_map_images_and_cached(tmp_path):
 def test_expected_recall_offgrid_calibration_fits_on_test_like_renders(tmp_path, monkeypatch):
     from dataclasses import replace
 
-    from markerplace.plan.methods import ExpectedRecall
+    from markerplace.plan.place.methods import ExpectedRecall
 
     monkeypatch.setattr(ExpectedRecall, "default_conf", replace(ExpectedRecall.default_conf, calibration_images=40))
     out = tmp_path / "plan"

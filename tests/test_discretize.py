@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from markerplace import geometry
-from markerplace.plan.discretization import load, save
-from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.plan.discretize.artifact import load, save
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.errors import UserError
 from markerplace.scene.types import MeshPart, Room, Scene
 

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene import load_scene
 from markerplace.scene.types import MeshPart, Scene
@@ -209,7 +209,7 @@ def _porch_house(depth: float = 1.5):
 def test_covered_porch_outside_the_walls_gets_no_camera_nor_tag(caplog):
     """The strip under the eaves has floor and ceiling like a room, but half its eye-level
     views leave the model: outdoors, left out and logged; ``start`` inside it keeps it."""
-    with caplog.at_level("INFO", logger="markerplace.plan.discretize"):
+    with caplog.at_level("INFO", logger="markerplace.plan.discretize.stage"):
         d = discretize(_porch_house(), DiscretizeConfig())
     assert np.all(d.locations[:, 1] > 0) and len(d.locations) > 50
     assert np.all(d.candidate_position[:, 1] > 0)  # no tag on the outside of the south wall

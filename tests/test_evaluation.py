@@ -7,7 +7,7 @@ from markerplace.testbed import metrics
 from markerplace.testbed import poses as tposes
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
-from markerplace.report import tables
+from markerplace.testbed.reporting import tables
 
 
 def _feasible(n_side=6, spacing=0.5, yaws=8):

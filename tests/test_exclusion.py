@@ -12,7 +12,7 @@ import pytest
 
 from markerplace.cli.main import main
 from markerplace.errors import UserError
-from markerplace.plan.exclusion import describe_changes, excluded, load_exclusion, placement_changes
+from markerplace.plan.discretize.exclusion import describe_changes, excluded, load_exclusion, placement_changes
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "2", "--workers", "1", "--quiet"]
 
@@ -125,7 +125,7 @@ def test_exclude_that_leaves_too_few_candidates_is_refused(tiny_run, tmp_path, c
 def test_exclusion_masks_candidates_and_the_calibrations_coverages(tiny_run):
     """exclude_candidates keeps the candidate arrays, coverages, visibility and a calibrated
     method's coverages aligned (existing markers stay at the end)."""
-    from markerplace.plan.exclusion import exclude_candidates
+    from markerplace.plan.discretize.exclusion import exclude_candidates
     from markerplace.plan.folder import read_plan_folder
     from markerplace.plan.planner import prepare
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.plan.expected_recall import expected_localized, expected_recall_greedy
-from markerplace.plan.localizability import entropy
-from markerplace.plan.placement import MarkerCoverage
-from markerplace.plan.success_model import (
+from markerplace.plan.place.expected_recall import expected_localized, expected_recall_greedy
+from markerplace.plan.score.localizability import entropy
+from markerplace.plan.place.greedy import MarkerCoverage
+from markerplace.plan.score.success_model import (
     SuccessModel,
     calibration_curve,
     fit_success_model,

@@ -14,9 +14,9 @@ import pytest
 import trimesh
 
 from markerplace.cli.main import main
-from markerplace.render.tags import outer_size
+from markerplace.tagfamily import outer_size
 from markerplace.scene.export import GLTF_FROM_WORLD
-from markerplace.scene.tagged_export import TAG_LIFT_M
+from markerplace.report.tagged_export import TAG_LIFT_M
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 

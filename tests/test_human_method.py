@@ -13,8 +13,8 @@ import pytest
 
 from markerplace.cli.main import build_parser, main, plan_config_from_args
 from markerplace.plan import planner
-from markerplace.plan.human import HumanConfig, WallAnalysis, analyse, human_placement, largest_remainder, select
-from markerplace.plan.methods import PLACEMENT_METHODS
+from markerplace.plan.place.human import HumanConfig, WallAnalysis, analyse, human_placement, largest_remainder, select
+from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.scene.export import export_glb
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.types import MeshPart, Scene

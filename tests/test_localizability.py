@@ -13,7 +13,7 @@ from markerplace.geometry import (
     world_from_cam_poses,
     world_from_marker_pose,
 )
-from markerplace.plan.localizability import (
+from markerplace.plan.score.localizability import (
     ENTROPY_CONST,
     NoiseConfig,
     entropy,
@@ -99,7 +99,7 @@ def test_pose_information_batching_and_order_invariance() -> None:
 
 def test_compiled_kernel_matches_numpy_whitening() -> None:
     """The compiled per-pose sum equals the numpy whitened-Jacobian Gram (two implementations)."""
-    from markerplace.plan.localizability import _gram, _whitened_jacobians
+    from markerplace.plan.score.localizability import _gram, _whitened_jacobians
 
     rng = np.random.default_rng(5)
     T, pts, idx = _scene(rng, n_poses=12, per_pose=80)
@@ -213,7 +213,7 @@ def test_compiled_kernel_gives_the_same_bits_fresh_and_from_numba_cache(tmp_path
     script.write_text(
         "import sys, numpy as np\n"
         "from markerplace.geometry import Intrinsics, world_from_cam_poses\n"
-        "from markerplace.plan.localizability import NoiseConfig, pose_information\n"
+        "from markerplace.plan.score.localizability import NoiseConfig, pose_information\n"
         "rng = np.random.default_rng(0)\n"
         "T = world_from_cam_poses(np.c_[rng.uniform(0, 5, (40, 2)), np.full(40, 1.5)], rng.uniform(0, 6.28, 40))\n"
         "pts = rng.uniform(-5, 10, (3000, 3)); idx = np.sort(rng.integers(0, 40, 3000))\n"

@@ -9,8 +9,8 @@ gtsam = pytest.importorskip("gtsam")
 from gtsam.symbol_shorthand import L, M, X  # noqa: E402
 
 from markerplace.geometry import Intrinsics, so3_exp, world_from_cam_pose, world_from_marker_pose  # noqa: E402
-from markerplace.plan.localizability import NoiseConfig, pose_information  # noqa: E402
-from markerplace.plan.marker_models import get_marker_model  # noqa: E402
+from markerplace.plan.score.localizability import NoiseConfig, pose_information  # noqa: E402
+from markerplace.plan.score.marker_models import get_marker_model  # noqa: E402
 
 NOISE = NoiseConfig()
 INTR = Intrinsics()

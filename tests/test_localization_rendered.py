@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.geometry import Intrinsics, rotation_angle_deg
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
 from markerplace.localization.localizer import Localizer, LocalizerConfig

@@ -9,8 +9,8 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, so3_exp, world_from_cam_pose, world_from_marker_pose
-from markerplace.plan.localizability import NoiseConfig, information_gain
-from markerplace.plan.marker_models import MARKER_MODELS, CornersModel, MarkerModel, PaperModel, get_marker_model
+from markerplace.plan.score.localizability import NoiseConfig, information_gain
+from markerplace.plan.score.marker_models import MARKER_MODELS, CornersModel, MarkerModel, PaperModel, get_marker_model
 from test_localizability import _facing_marker
 
 K = Intrinsics().K
@@ -45,7 +45,7 @@ def _golden_poses():
 
 @pytest.mark.parametrize("name, traces, sums", [
     # recorded with marker_information_paper / marker_information_corners of
-    # plan/localizability.py before the models moved here (commit ef0a0c7)
+    # plan/score/localizability.py before the models moved here (commit ef0a0c7)
     ("paper", [9544761.38096548, 7804804.879878006, 6004849.8787530335, 10324741.881452968],
      [9342599.118489, 9929411.83092, 4612050.397548, 10534736.631584]),
     ("corners", [454758.7498698049, 572117.2037793573, 567096.0380146679, 452204.7675733988],
@@ -86,7 +86,7 @@ def test_corners_model_detectability() -> None:
 def test_paper_model_ignores_distance_and_size() -> None:
     """The factor's noise does not grow with distance: ln det M is the same at 2 m and 5 m (det of
     an adjoint is 1), and the tag size plays no part at all."""
-    from markerplace.plan.localizability import logdet_spd
+    from markerplace.plan.score.localizability import logdet_spd
 
     paper = get_marker_model("paper")
     T = world_from_cam_pose(np.array([0.0, 0.0, 1.5]), 0.0)

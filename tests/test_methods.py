@@ -13,8 +13,8 @@ from markerplace.errors import UserError
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.plan import planner
-from markerplace.plan.localizability import entropy
-from markerplace.plan.methods import (
+from markerplace.plan.score.localizability import entropy
+from markerplace.plan.place.methods import (
     OMP,
     PLACEMENT_METHODS,
     Choice,
@@ -22,9 +22,9 @@ from markerplace.plan.methods import (
     get_placement_method,
     method_from_config,
 )
-from markerplace.plan.baselines import random_placement, uniform_placement
-from markerplace.plan.placement import MarkerCoverage, apply_coverages, omp_greedy
-from markerplace.testbed import placements
+from markerplace.plan.place.baselines import random_placement, uniform_placement
+from markerplace.plan.place.greedy import MarkerCoverage, apply_coverages, omp_greedy
+from markerplace.testbed import marker_sets as placements
 from markerplace.testbed import config as tbconfig
 
 
@@ -154,7 +154,7 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
     estimate, help texts and the report tables all see it."""
     from markerplace.cli.evaluate import evaluate_config_from_args
     from markerplace.cli.main import build_parser, plan_config_from_args
-    from markerplace.report.tables import display_name, method_table
+    from markerplace.testbed.reporting.tables import display_name, method_table
 
     data = _data(4)
     args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--method", "toy", "-v", "7", "-k", "3"])

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.plan.localizability import information_gain
-from markerplace.plan.placement import (
+from markerplace.plan.score.localizability import information_gain
+from markerplace.plan.place.greedy import (
     MarkerCoverage,
     _Problem,
     coverage_percentages,
@@ -16,7 +16,7 @@ from markerplace.plan.placement import (
     percentile_with_zeros,
     q_from_v,
 )
-from markerplace.plan.baselines import random_placement, uniform_placement
+from markerplace.plan.place.baselines import random_placement, uniform_placement
 
 
 def random_problem(rng: np.random.Generator, N: int, C: int, max_cov: int, ties: bool = False):

@@ -102,7 +102,7 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     no method can place a tag nobody sees."""
     from dataclasses import replace
 
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
     from markerplace.plan.planner import PlanConfig, prepare
@@ -115,7 +115,7 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     assert all(len(cov.pose_idx) > 0 for cov in data.coverages[:C])
     removed = data.disc.summary["candidates_removed"]
     assert removed["not seen"] >= 1  # with 2 yaws on a 1 m grid some walls face no camera
-    from markerplace.plan.wall_candidates import RULES
+    from markerplace.plan.discretize.wall_candidates import RULES
 
     assert set(removed) == {*RULES, "not seen"}
     assert removed["furniture"] >= 1 and removed["pictures"] >= 1  # tiny's bookshelf, cabinet and picture

@@ -2,7 +2,7 @@
 
 from dataclasses import replace
 
-from markerplace.plan.discretize import DiscretizeConfig
+from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.planner import PlacementConfig, PlanConfig
 
 

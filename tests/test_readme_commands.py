@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from markerplace.cli.main import main
-from markerplace.scene.catalogue import builtin_names
+from markerplace.scene.builtin.catalogue import builtin_names
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 FILE_SUFFIXES = (".json", ".ply", ".obj", ".glb", ".gltf")

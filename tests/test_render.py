@@ -10,7 +10,7 @@ from markerplace.geometry import Intrinsics, invert, project, transform_points, 
 from markerplace.markers import Marker
 from markerplace.render.gl_resources import projection_matrix
 from markerplace.render.renderer import RenderResult, Renderer
-from markerplace.render.tags import outer_size
+from markerplace.tagfamily import outer_size
 from markerplace.render.views import default_pose, write_render_outputs
 from markerplace.scene.types import MeshPart, Room, Scene
 

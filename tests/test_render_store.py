@@ -49,7 +49,7 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     """With the predictions deleted, a second run in the same folder takes every render with
     markers from the store (none is made) and gives bit-identical per-image errors; a run that
     adds placements renders only views no earlier run rendered."""
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.planner import PlanConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
@@ -94,7 +94,7 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
 
 def test_candidate_tag_ids_are_fixed_by_spot():
     from markerplace.markers import Marker
-    from markerplace.testbed.placements import PlacementRun, shift_markers, with_candidate_ids
+    from markerplace.testbed.marker_sets import PlacementRun, shift_markers, with_candidate_ids
 
     rng = np.random.default_rng(0)
     cands = np.tile(np.eye(4), (6, 1, 1))

@@ -11,7 +11,7 @@ from markerplace.markers import Marker
 from markerplace.render import gl_resources
 from markerplace.render.renderer import Renderer
 from markerplace.localization.tags import make_detector
-from markerplace.render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
+from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
 from markerplace.scene.types import MeshPart, Scene
 
 K = Intrinsics().K

@@ -14,7 +14,7 @@ import pytest
 
 from markerplace.cli.main import main
 from markerplace.report.captions import describe_tag, facing_label, wall_side
-from markerplace.report.eval_report import gallery_selection
+from markerplace.testbed.reporting.page import gallery_selection
 from markerplace.report.html import markdown_to_html
 from markerplace.report.installer import standing_distance
 from markerplace.scene.raycast import RayCaster

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from markerplace.report.paired import (
+from markerplace.testbed.reporting.paired import (
     bootstrap_difference,
     fixed_broken,
     fixed_broken_table,

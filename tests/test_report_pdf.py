@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.render.tags import outer_size
+from markerplace.tagfamily import outer_size
 from markerplace.report.pdf import write_tags_pdf
 from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout
 from markerplace.report.printable import caption_for

@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from markerplace.render.tags import outer_size
+from markerplace.tagfamily import outer_size
 from markerplace.report.printable import caption_for, tag_modules, tag_svg, write_tag_sheets
 
 NS = "{http://www.w3.org/2000/svg}"

@@ -120,7 +120,7 @@ def test_check_keeps_foreign_tag_maps_and_runs_from_inside_the_plan(copy_of, tmp
 
 
 def test_no_write_onto_or_deletion_of_a_file_markerplace_did_not_write(tmp_path):
-    from markerplace.io_utils import write_json
+    from markerplace.runtime.atomic_io import write_json
 
     folder = tmp_path / "adopted"
     folder.mkdir()
@@ -262,7 +262,7 @@ def test_live_lock_is_named_and_stale_lock_taken_over(tmp_path, caplog):
 
 def test_similarity_is_recomputed_when_the_observations_change(copy_of):
     from markerplace.imaging.features import FeatureSet
-    from markerplace.plan.similarity import SimilarityConfig, count_similar
+    from markerplace.plan.similarity.stage import SimilarityConfig, count_similar
     from markerplace.runtime import cache
 
     run = copy_of()
@@ -284,7 +284,7 @@ def test_similarity_is_recomputed_when_the_observations_change(copy_of):
 
 
 def test_a_stage_with_upstream_artifacts_reruns_when_they_change(tmp_path):
-    from markerplace.io_utils import write_json
+    from markerplace.runtime.atomic_io import write_json
     from markerplace.runtime import cache
     from markerplace.runtime.stages import cached
 

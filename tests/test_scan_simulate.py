@@ -314,7 +314,7 @@ def test_office_scan_size_accuracy_and_time(tmp_path):
 def test_discretization_of_the_scan_matches_the_original(tiny_scan):
     """The planner on the fused scan finds (nearly) the camera locations of the procedural
     original on the same grid, its storey and wall candidates, despite holes and noise."""
-    from markerplace.plan.discretize import DiscretizeConfig, discretize
+    from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 
     out, _ = tiny_scan
     original = discretize(load_scene("tiny"), DiscretizeConfig())

@@ -10,8 +10,8 @@ from scipy import ndimage
 
 from markerplace.errors import UserError
 from markerplace.scene import load_scene
-from markerplace.scene.catalogue import build_builtin, builtin_names, get_layout, list_scenes
-from markerplace.scene.textures import BUNDLED_PHOTOS, bundled_photo
+from markerplace.scene.builtin.catalogue import build_builtin, builtin_names, get_layout, list_scenes
+from markerplace.scene.builtin.textures import BUNDLED_PHOTOS, bundled_photo
 
 AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15), "house": (120, 170),
                "campus": (2000, 2200)}

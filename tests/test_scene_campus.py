@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from markerplace.cli.main import main
-from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.scene import load_scene
-from markerplace.scene.campus import HOLE, build_campus, campus_plan
-from markerplace.scene.catalogue import get_layout, list_scenes
+from markerplace.scene.builtin.campus import HOLE, build_campus, campus_plan
+from markerplace.scene.builtin.catalogue import get_layout, list_scenes
 from markerplace.scene.raycast import RayCaster
 
 CORRIDOR_XY = (24.0, 6.5)  # the corridor's middle, on both storeys

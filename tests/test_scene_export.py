@@ -10,7 +10,7 @@ import pytest
 
 from markerplace.cli.main import main
 from markerplace.scene import load_scene
-from markerplace.scene.catalogue import builtin_names
+from markerplace.scene.builtin.catalogue import builtin_names
 from markerplace.scene.export import export_glb
 
 

@@ -10,7 +10,7 @@ import pytest
 from markerplace.geometry import world_from_cam_pose
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene import load_scene
-from markerplace.scene.catalogue import list_scenes
+from markerplace.scene.builtin.catalogue import list_scenes
 from markerplace.scene.export import export_glb
 
 DOWN, UP = np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 1.0])
@@ -207,8 +207,8 @@ def test_render_through_the_glass_wall_shows_the_room_behind(house):
 def test_procedural_step_towards_a_sunken_room_on_either_side_and_floor_holes():
     """The building blocks the house uses: a step on the lower room's side (here +x), walls down
     to the lower floor, no lintel over a full-height opening, and a floor hole."""
-    from markerplace.scene.layout import Door, Layout, RoomSpec
-    from markerplace.scene.procedural import build_scene, subtract_rects
+    from markerplace.scene.builtin.layout import Door, Layout, RoomSpec
+    from markerplace.scene.builtin.procedural import build_scene, subtract_rects
 
     hole = (0.5, 0.5, 1.5, 2.0)
     layout = Layout(

@@ -14,8 +14,8 @@ import re
 import numpy as np
 import pytest
 
-from markerplace.plan.candidate_rules import ALLOWABLE, CandidateConfig, surface_shape
-from markerplace.plan.discretize import DiscretizeConfig, discretize
+from markerplace.plan.discretize.candidate_rules import ALLOWABLE, CandidateConfig, surface_shape
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.scene import load_scene
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.semantics import CATEGORIES, classify
@@ -186,7 +186,7 @@ def test_without_names_geometry_and_glass_still_keep_tags_off(caplog):
 
 
 def test_the_log_line_adds_up(caplog):
-    caplog.set_level(logging.INFO, logger="markerplace.plan.discretize")
+    caplog.set_level(logging.INFO, logger="markerplace.plan.discretize.stage")
     d = discretize(rules_room(), DiscretizeConfig(**FAST))
     line = next(r.getMessage() for r in caplog.records if "wall spots" in r.getMessage())
     m = re.search(r"(\d+) wall spots [\d.]+ m apart = (.*) \+ (\d+) that pass; candidates = those (\d+)"

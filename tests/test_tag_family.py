@@ -20,7 +20,7 @@ from markerplace.geometry import Intrinsics, world_from_marker_pose
 from markerplace.localization.tags import make_detector
 from markerplace.markers import Marker
 from markerplace.render.renderer import Renderer
-from markerplace.render.tags import NUM_TAGS, QUIET_BITS, TAG_BITS, tag_image
+from markerplace.tagfamily import NUM_TAGS, QUIET_BITS, TAG_BITS, tag_image
 from markerplace.scene.types import MeshPart, Scene
 from official_tags import OFFICIAL_IDS, official_png
 

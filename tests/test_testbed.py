@@ -13,7 +13,7 @@ from markerplace.imaging.visibility import marker_points, markers_in_view
 from markerplace.markers import Marker
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
-from markerplace.testbed import placements
+from markerplace.testbed import marker_sets as placements
 from markerplace.testbed import poses as tposes
 from markerplace.testbed import config as tbconfig
 from markerplace.testbed.images import TestbedImaging
@@ -276,7 +276,7 @@ def test_reusing_unchanged_queries_changes_no_result(tmp_path):
     from dataclasses import replace
 
     from markerplace.geometry import world_from_marker_pose
-    from markerplace.plan.discretize import DiscretizeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.planner import PlanConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec

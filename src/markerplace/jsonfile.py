@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import UserError
+from markerplace.errors import UserError
 
 __all__ = ["read_json", "json_depth", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UserError
-from .io_utils import clean_array
-from .geometry import marker_corners_local, transform_points, world_from_marker_pose
+from markerplace.errors import UserError
+from markerplace.runtime.atomic_io import clean_array
+from markerplace.geometry import marker_corners_local, transform_points, world_from_marker_pose
 
 FAMILY = "tag36h11"
 DEFAULT_TAG_SIZE = 0.4
@@ -71,7 +71,7 @@ and 6-digit exports stay far below it; a scaled, sheared or mirrored matrix does
 def check_tag_id(value, where: str = "tag_id") -> int:
     """``value`` as a tag36h11 id: a JSON integer (not ``true``, ``1.5``, ``"3"`` or ``1e30``) in
     0..586. Raises :class:`UserError` naming ``where``."""
-    from .render.tags import NUM_TAGS
+    from markerplace.tagfamily import NUM_TAGS
 
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise UserError(f"{where} {_short(value)} is not an integer: give a "
@@ -179,7 +179,7 @@ def load_markers(path: str | Path, option: str | None = None,
         option: how the user gave it (``"--existing"``), for messages; default "marker file".
         default_size: black-square edge (metres) of entries without ``size``.
     """
-    from .jsonfile import read_json
+    from markerplace.jsonfile import read_json
 
     path = Path(path)
     what = f"{option} {path}" if option else f"marker file {path}"
@@ -205,7 +205,7 @@ def load_markers(path: str | Path, option: str | None = None,
 def check_tag_budget(k: int, existing: list[Marker], first_tag_id: int = 0) -> None:
     """Refuse a plan whose ``k`` new tags cannot get ids of their own in tag36h11 next to the
     ``existing`` ones (placed ids count up from ``first_tag_id``, skipping existing ids)."""
-    from .render.tags import NUM_TAGS
+    from markerplace.tagfamily import NUM_TAGS
 
     free = NUM_TAGS - first_tag_id - sum(1 for m in existing if m.tag_id >= first_tag_id)
     if k > free:
@@ -237,8 +237,8 @@ def check_markers_on_walls(scene, markers, source: str = "markers", tolerance: f
     """
     if not markers:
         return
-    from .scene.raycast import RayCaster
-    from .scene.worldframe import points_to_user, world_offset
+    from markerplace.scene.raycast import RayCaster
+    from markerplace.scene.worldframe import points_to_user, world_offset
 
     P = np.array([m.position for m in markers], dtype=float).reshape(-1, 3)
     N = np.array([m.normal for m in markers], dtype=float).reshape(-1, 3)

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import Sequence
 
-from .errors import UserError
+from markerplace.errors import UserError
 
 __all__ = ["check_output_dir", "check_output_file"]
 

@@ -18,7 +18,7 @@ import sys
 import time
 from typing import Iterable, Iterator, TypeVar
 
-from .runtime.interrupt import raise_if_stopping
+from markerplace.runtime.interrupt import raise_if_stopping
 
 log = logging.getLogger("markerplace.progress")
 

@@ -1,7 +1,7 @@
 """Registries: interchangeable parts chosen by name (glue-factory style).
 
-Marker models (:data:`markerplace.plan.marker_models.MARKER_MODELS`), placement methods
-(:data:`markerplace.plan.methods.PLACEMENT_METHODS`) and localizers
+Marker models (:data:`markerplace.plan.score.marker_models.MARKER_MODELS`), placement methods
+(:data:`markerplace.plan.place.methods.PLACEMENT_METHODS`) and localizers
 (:data:`markerplace.localization.localizer.LOCALIZERS`) are classes kept in a :class:`Registry`,
 a dict from name to class. Everything that lists choices (CLI ``choices=`` and help, validation
 messages, evaluation, report tables) reads the registry, so adding a part means writing its
@@ -21,7 +21,7 @@ Registration order is the order of every listing (help, tables).
 from __future__ import annotations
 
 import dataclasses
-from .errors import UserError
+from markerplace.errors import UserError
 
 
 class Registry(dict):

@@ -12,7 +12,7 @@ once by :func:`markerplace.cli.main.main` for every subcommand), and :func:`chec
 a ``render`` pose outside the model or seeing nothing of it. Lengths are metres, angles degrees.
 
 The other up-front checks: output paths in :mod:`markerplace.output_checks`, the run-size guard
-in :mod:`markerplace.size_guard`.
+in :mod:`markerplace.pipelines.size_guard`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-from .errors import UserError
+from markerplace.errors import UserError
 
 SEED_MAX = 2**32 - 1
 
@@ -161,7 +161,7 @@ def check_args(args) -> None:
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", EVAL_K)
     if getattr(args, "cluster", None) is not None:
-        from .runtime.cluster import parse_cluster
+        from markerplace.runtime.cluster import parse_cluster
 
         parse_cluster(args.cluster)
         if getattr(args, "workers", 0):

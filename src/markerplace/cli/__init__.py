@@ -1,5 +1,5 @@
 """Command line: one module per subcommand group; :func:`main` is the ``markerplace`` entry point."""
 
-from .main import main
+from markerplace.cli.main import main
 
 __all__ = ["main"]

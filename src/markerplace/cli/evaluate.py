@@ -9,13 +9,13 @@ import argparse
 import logging
 from pathlib import Path
 
-from ..errors import UserError
+from markerplace.errors import UserError
 
 log = logging.getLogger("markerplace.cli.main")
 
 
 def _int_list(text: str, option: str) -> tuple[int, ...]:
-    from ..validation import EVAL_K, parse_int_list
+    from markerplace.validation import EVAL_K, parse_int_list
 
     return parse_int_list(text, option, EVAL_K)
 
@@ -26,7 +26,7 @@ def _name_list(text: str) -> tuple[str, ...]:
 
 def evaluate_config_from_args(args: argparse.Namespace):
     """Build an :class:`~markerplace.testbed.config.EvaluateConfig` from parsed ``evaluate`` arguments."""
-    from ..testbed.config import DiagnosticsConfig, EvaluateConfig, LocalizationConfig, StudyConfig, TestSetConfig
+    from markerplace.testbed.config import DiagnosticsConfig, EvaluateConfig, LocalizationConfig, StudyConfig, TestSetConfig
 
     return EvaluateConfig(
         test=TestSetConfig(tests=args.tests, sets=_name_list(args.test_sets), seed=args.test_seed),
@@ -41,14 +41,14 @@ def evaluate_config_from_args(args: argparse.Namespace):
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
-    from .options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
-    from ..testbed.config import validate_evaluate_config
-    from ..testbed.placements import find_placement_files, method_names
-    from ..markers import load_markers
-    from ..scene.spec import SceneSpec
-    from ..plan.planner import validate
-    from ..testbed.experiment import run_evaluation
-    from ..runtime.run_folder import open_run_folder
+    from markerplace.cli.options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
+    from markerplace.testbed.config import validate_evaluate_config
+    from markerplace.testbed.marker_sets import find_placement_files, method_names
+    from markerplace.markers import load_markers
+    from markerplace.scene.spec import SceneSpec
+    from markerplace.plan.planner import validate
+    from markerplace.testbed.experiment import run_evaluation
+    from markerplace.runtime.run_folder import open_run_folder
 
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)
@@ -76,11 +76,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
-    from ..plan.methods import PLACEMENT_METHODS
-    from ..localization.localizer import LOCALIZERS
-    from ..testbed.config import TAG_IDS
-    from ..testbed.placements import baseline_methods, method_names
-    from .options import add_plan_args, add_scene_args
+    from markerplace.plan.place.methods import PLACEMENT_METHODS
+    from markerplace.localization.localizer import LOCALIZERS
+    from markerplace.testbed.config import TAG_IDS
+    from markerplace.testbed.marker_sets import baseline_methods, method_names
+    from markerplace.cli.options import add_plan_args, add_scene_args
 
     methods = ", ".join(f"{name} = {cls.label or name}" for name, cls in PLACEMENT_METHODS.items())
 

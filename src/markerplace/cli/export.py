@@ -1,5 +1,5 @@
 """``markerplace export PLAN_DIR --gltf OUT.glb``: the plan's model with its tags as textured
-quads, in the model's original axes and units (:mod:`markerplace.scene.tagged_export`).
+quads, in the model's original axes and units (:mod:`markerplace.report.tagged_export`).
 Registered by :func:`markerplace.cli.main.build_parser`."""
 
 from __future__ import annotations
@@ -8,15 +8,15 @@ import argparse
 import logging
 from pathlib import Path
 
-from ..errors import UserError
+from markerplace.errors import UserError
 
 log = logging.getLogger("markerplace.cli.main")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from ..output_checks import check_output_file
-    from ..plan.folder import read_plan_folder
-    from ..scene.tagged_export import export_plan_glb
+    from markerplace.output_checks import check_output_file
+    from markerplace.plan.folder import read_plan_folder
+    from markerplace.report.tagged_export import export_plan_glb
 
     if Path(args.gltf).suffix.lower() != ".glb":
         raise UserError(f"--gltf {args.gltf!r} must end in .glb (binary glTF with the textures inside)")

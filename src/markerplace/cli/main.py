@@ -13,23 +13,23 @@ import logging
 import sys
 from pathlib import Path
 
-from .. import __version__
-from ..errors import UserError
-from ..log import setup_logging
-from .options import (add_plan_args, add_scene_args, check_cluster_answers, plan_config_from_args,
+from markerplace import __version__
+from markerplace.errors import UserError
+from markerplace.log import setup_logging
+from markerplace.cli.options import (add_plan_args, add_scene_args, check_cluster_answers, plan_config_from_args,
                       plan_inputs_in_scene_frame)
 
 log = logging.getLogger("markerplace.cli.main")
 
 
 def _parse_pose(text: str):
-    from ..validation import COORDINATE, YAW_DEG, parse_floats
+    from markerplace.validation import COORDINATE, YAW_DEG, parse_floats
 
     return parse_floats(text, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
 
 
 def cmd_scene_list(args: argparse.Namespace) -> int:
-    from ..scene.catalogue import list_scenes
+    from markerplace.scene.builtin.catalogue import list_scenes
 
     rows = list_scenes()
     print(f"{'name':<10} {'floor area (m^2)':>16} {'rooms':>6}  description")
@@ -39,9 +39,9 @@ def cmd_scene_list(args: argparse.Namespace) -> int:
 
 
 def cmd_scene_export(args: argparse.Namespace) -> int:
-    from ..scene import load_scene
-    from ..output_checks import check_output_file
-    from ..scene.export import export_glb
+    from markerplace.scene import load_scene
+    from markerplace.output_checks import check_output_file
+    from markerplace.scene.export import export_glb
 
     check_output_file(args.out, "scene export OUT")
     if Path(args.out).suffix.lower() != ".glb":
@@ -56,14 +56,14 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ..geometry import Intrinsics, world_from_cam_pose
-    from ..markers import load_markers
-    from ..render.renderer import Renderer
-    from ..render.views import default_pose, write_render_outputs
-    from ..scene import load_scene
-    from ..output_checks import check_output_file
-    from ..validation import check_pose_in_scene, check_render_sees_something
-    from ..scene.worldframe import markers_to_internal, points_to_internal, world_offset
+    from markerplace.geometry import Intrinsics, world_from_cam_pose
+    from markerplace.markers import load_markers
+    from markerplace.render.renderer import Renderer
+    from markerplace.render.views import default_pose, write_render_outputs
+    from markerplace.scene import load_scene
+    from markerplace.output_checks import check_output_file
+    from markerplace.validation import check_pose_in_scene, check_render_sees_something
+    from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
 
     pose = _parse_pose(args.pose) if args.pose else None
     check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
@@ -88,24 +88,24 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from ..markers import check_markers_on_walls, check_tag_budget, load_markers
-    from ..scene.spec import SceneSpec
-    from ..plan.placement import check_k
-    from ..plan.planner import first_pick_gain, place, prepare, validate
-    from ..report.plan_outputs import write_plan_outputs
-    from ..runtime.run_folder import open_run_folder
-    from ..scene.worldframe import markers_to_internal, world_offset
+    from markerplace.markers import check_markers_on_walls, check_tag_budget, load_markers
+    from markerplace.scene.spec import SceneSpec
+    from markerplace.plan.place.greedy import check_k
+    from markerplace.plan.planner import first_pick_gain, place, prepare, validate
+    from markerplace.report.plan_outputs import write_plan_outputs
+    from markerplace.runtime.run_folder import open_run_folder
+    from markerplace.scene.worldframe import markers_to_internal, world_offset
 
     config = plan_config_from_args(args)
     validate(config)
-    from ..plan.methods import PLACEMENT_METHODS
+    from markerplace.plan.place.methods import PLACEMENT_METHODS
 
     if config.placement.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(config.placement.method).calibrated:
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
                     "model)", config.placement.calibration_poses, config.placement.method)
     existing = load_markers(args.existing, "--existing") if args.existing else []
     check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
-    from ..plan.exclusion import apply_exclusion, load_exclusion, previous_markers
+    from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion, previous_markers
 
     exclusion = load_exclusion(args.exclude) if args.exclude else None
     previous = previous_markers(args.out, args.scene)  # to say what this run changes
@@ -118,9 +118,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     check_markers_on_walls(scene, existing, f"--existing {args.existing}")
     run_config = plan_inputs_in_scene_frame(config, scene, args.force)
     progress = not args.quiet
-    from ..runtime.executor import make_executor
-    from ..size_guard import measured_size_check
-    from ..testbed.calibration import calibrate_plan
+    from markerplace.runtime.executor import make_executor
+    from markerplace.pipelines.size_guard import measured_size_check
+    from markerplace.testbed.calibration import calibrate_plan
 
     with make_executor(run_config.runtime) as executor:
         size_check = measured_size_check(scene, spec, run_config, config.placement.k, force=args.force)
@@ -141,13 +141,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
     log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in data.timings.items()))
-    from ..report.plan_report import write_plan_report
+    from markerplace.report.plan_report import write_plan_report
 
     report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
     print(f"wrote {report}")
     if previous is not None:
-        from ..plan.exclusion import describe_changes, placement_changes
+        from markerplace.plan.discretize.exclusion import describe_changes, placement_changes
 
         for line in describe_changes(placement_changes(previous, previous_markers(args.out, args.scene) or [])):
             print(line)
@@ -195,7 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p_render.set_defaults(func=cmd_render)
 
-    from ..plan.methods import PLACEMENT_METHODS
+    from markerplace.plan.place.methods import PLACEMENT_METHODS
 
     p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
     add_scene_args(p_plan)
@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
                              "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
                              "placing, so a re-run reuses every cached stage (see docs/cli.md)")
-    from ..report.sheets import PAPER_CHOICES
+    from markerplace.report.sheets import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "
@@ -216,18 +216,18 @@ def build_parser() -> argparse.ArgumentParser:
     add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
-    from .evaluate import add_evaluate_parser
+    from markerplace.cli.evaluate import add_evaluate_parser
 
     add_evaluate_parser(sub)
 
-    from .scan import add_scan_parsers
+    from markerplace.cli.scan import add_scan_parsers
 
     add_scan_parsers(sub, p_export)  # `fuse` and `scene export ... --as-scan`
 
-    from .check import add_check_parser
-    from .export import add_export_parser
+    from markerplace.cli.check import add_check_parser
+    from markerplace.cli.export import add_export_parser
 
-    from .study import add_study_parser
+    from markerplace.cli.study import add_study_parser
 
     add_study_parser(sub)  # `study SCENE --out DIR`
     add_export_parser(sub)  # `export PLAN_DIR --gltf OUT.glb`
@@ -262,7 +262,7 @@ RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..runtime.interrupt import InterruptGuard
+    from markerplace.runtime.interrupt import InterruptGuard
 
     with InterruptGuard() as guard:
         try:
@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
                     parser.parse_args(["scene", "--help"])
                 parser.print_help()
                 return 2
-            from ..validation import check_args
+            from markerplace.validation import check_args
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
             try:
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
                     return guard.stopped(KeyboardInterrupt())
                 return code
             finally:
-                from ..runtime.run_folder import close_all
+                from markerplace.runtime.run_folder import close_all
 
                 close_all()  # unlock the run folders; one the run wrote nothing into is left as found
         except UserError as err:

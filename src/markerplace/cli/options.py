@@ -30,7 +30,7 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
 def parse_xy(text: str | None):
     if text is None:
         return None
-    from ..validation import COORDINATE, parse_floats
+    from markerplace.validation import COORDINATE, parse_floats
 
     return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
 
@@ -38,11 +38,11 @@ def parse_xy(text: str | None):
 def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
     """``config`` with ``--start`` moved into the scene's internal frame
     (:mod:`markerplace.scene.worldframe`), after the run-size guard
-    (:func:`markerplace.size_guard.check_run_size`; ``force`` = ``--force``)."""
+    (:func:`markerplace.pipelines.size_guard.check_run_size`; ``force`` = ``--force``)."""
     from dataclasses import replace
 
-    from ..size_guard import RECOUNT_FACTOR, check_run_size, estimate_run, over_limits
-    from ..scene.worldframe import points_to_internal, world_offset
+    from markerplace.pipelines.size_guard import RECOUNT_FACTOR, check_run_size, estimate_run, over_limits
+    from markerplace.scene.worldframe import points_to_internal, world_offset
 
     offset = world_offset(scene)
     if config.discretize.start is not None and offset.any():
@@ -51,7 +51,7 @@ def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None,
     estimate = estimate_run(scene, config, evaluate_config, extra_placements)
     if over_limits(estimate) and not over_limits(estimate, factor=RECOUNT_FACTOR) and not force:
         # the bound is loose (multi-level models): count the poses (seconds)
-        from ..plan.discretize import discretize
+        from markerplace.plan.discretize.stage import discretize
 
         log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
         poses = len(discretize(scene, config.discretize).world_from_cam)
@@ -64,7 +64,7 @@ def check_cluster_answers(args: argparse.Namespace) -> None:
     """``--cluster tcp://...``: a Dask scheduler must answer there (connect and handshake within
     seconds, :func:`markerplace.runtime.cluster.check_scheduler`) before the scene is loaded."""
     if getattr(args, "cluster", None):
-        from ..runtime.cluster import check_scheduler
+        from markerplace.runtime.cluster import check_scheduler
 
         check_scheduler(args.cluster)
 
@@ -83,10 +83,10 @@ def parse_level(text: str):
 
 
 def parse_allow(text: str | None) -> tuple[str, ...]:
-    """``--allow``: comma list of :data:`~markerplace.plan.wall_candidates.ALLOWABLE` keys
+    """``--allow``: comma list of :data:`~markerplace.plan.discretize.wall_candidates.ALLOWABLE` keys
     (``doors,furniture``); ``none`` or empty: nothing. Raises UserError for an unknown one."""
-    from ..errors import UserError
-    from ..plan.wall_candidates import ALLOWABLE
+    from markerplace.errors import UserError
+    from markerplace.plan.discretize.wall_candidates import ALLOWABLE
 
     if text is None:
         return ()
@@ -104,9 +104,9 @@ def plan_config_from_args(args: argparse.Namespace):
     """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
     from dataclasses import replace
 
-    from ..plan.discretize import DiscretizeConfig
-    from ..plan.planner import PlacementConfig, PlanConfig
-    from ..runtime.executor import RuntimeConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
+    from markerplace.plan.planner import PlacementConfig, PlanConfig
+    from markerplace.runtime.executor import RuntimeConfig
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
                    grid_spacing=args.grid_spacing, clearance=args.clearance, num_yaws=args.yaws,
@@ -130,7 +130,7 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
     ``max(ks)`` markers and the smaller budgets are evaluated on their own placements or prefixes.
     ``args`` is not changed.
     """
-    from ..markers import check_tag_budget
+    from markerplace.markers import check_tag_budget
 
     check_tag_budget(max(ks), [])  # placements get ids 0..k-1
     return plan_config_from_args(argparse.Namespace(**{**vars(args), "k": max(ks)}))
@@ -138,8 +138,8 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
 
 def add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
-    from ..plan.marker_models import MARKER_MODELS
-    from ..plan.methods import CALIBRATION_POSES, PLACEMENT_METHODS
+    from markerplace.plan.score.marker_models import MARKER_MODELS
+    from markerplace.plan.place.methods import CALIBRATION_POSES, PLACEMENT_METHODS
 
     g = p.add_argument_group("discretization")
     g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")
@@ -152,7 +152,7 @@ def add_plan_args(p: argparse.ArgumentParser) -> None:
                    help="also plan free regions open to the outside (a porch, a strip under the eaves, a balcony; "
                         "or a room whose glass walls the scan lost): by default a region from which more than 35 %% "
                         "of eye-level views hit nothing is left out, and logged")
-    from ..plan.wall_candidates import ALLOWABLE
+    from markerplace.plan.discretize.wall_candidates import ALLOWABLE
 
     g.add_argument("--allow", default=None, metavar="CATEGORIES",
                    help="let tags go on these too, comma-separated: " + ", ".join(ALLOWABLE) + " (default: none, "

@@ -13,13 +13,13 @@ __all__ = ["add_study_parser"]
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``markerplace study``: prints the study's tables."""
-    from ..runtime.run_folder import open_run_folder
-    from ..plan.planner import validate
-    from ..scene.spec import SceneSpec
-    from ..testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
-    from ..testbed.study import StudyPlan, run_study
-    from ..validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
-    from .options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
+    from markerplace.runtime.run_folder import open_run_folder
+    from markerplace.plan.planner import validate
+    from markerplace.scene.spec import SceneSpec
+    from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
+    from markerplace.testbed.study import StudyPlan, run_study
+    from markerplace.validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
+    from markerplace.cli.options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
 
     ks = parse_int_list(args.k, "--k", EVAL_K)
     config = EvaluateConfig(test=TestSetConfig(tests=args.tests, seed=args.test_seed),
@@ -43,7 +43,7 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 def add_study_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``study`` subcommand (with its handler) to ``subparsers``."""
-    from .options import add_plan_args, add_scene_args
+    from markerplace.cli.options import add_plan_args, add_scene_args
 
     p = subparsers.add_parser(
         "study", help="the paper's parameter study (Table II: v, tag detection, test data, similarity) and "

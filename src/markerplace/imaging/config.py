@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..geometry import Intrinsics
-from ..localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
+from markerplace.geometry import Intrinsics
+from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
 
 __all__ = ["ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT"]
 

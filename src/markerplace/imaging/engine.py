@@ -16,11 +16,11 @@ from typing import Sequence
 
 import numpy as np
 
-from ..localization.features import extract_sift, lift_to_3d
-from ..markers import Marker
-from .config import ImagingConfig
-from .features import ImageFeatures
-from .visibility import markers_in_view, markers_unoccluded
+from markerplace.localization.features import extract_sift, lift_to_3d
+from markerplace.markers import Marker
+from markerplace.imaging.config import ImagingConfig
+from markerplace.imaging.features import ImageFeatures
+from markerplace.imaging.visibility import markers_in_view, markers_unoccluded
 
 __all__ = ["EngineSpec", "ImagingEngine", "imaging_job", "marker_key"]
 
@@ -52,7 +52,7 @@ class ImagingEngine:
     """A worker's imaging state (see the module docstring)."""
 
     def __init__(self, spec: EngineSpec):
-        from ..render.renderer import Renderer
+        from markerplace.render.renderer import Renderer
 
         self.spec = spec
         self.config = spec.config
@@ -82,7 +82,7 @@ class ImagingEngine:
         ids = np.zeros(0, np.int32)
         corners = np.zeros((0, 4, 2), np.float32)
         if tags:
-            from ..localization.tags import detect_tags
+            from markerplace.localization.tags import detect_tags
 
             dets = detect_tags(result.rgb)
             ids = np.array([d.tag_id for d in dets], dtype=np.int32)
@@ -118,8 +118,8 @@ def _close(engine: ImagingEngine) -> None:
 
 def imaging_job(spec: EngineSpec):
     """The executor job whose worker state is an :class:`ImagingEngine` for ``spec``."""
-    from ..runtime.cache import hash_of
-    from ..runtime.executor import WorkerJob
+    from markerplace.runtime.cache import hash_of
+    from markerplace.runtime.executor import WorkerJob
 
     key = hash_of("imaging-engine", repr(spec.scene), spec.config, sorted(spec.samples.items()))
     return WorkerJob(_build, spec, key, _close)

@@ -21,8 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..io_utils import allocate, atomic_path, write_npy
-from ..runtime import run_folder
+from markerplace.runtime.atomic_io import allocate, atomic_path, write_npy
+from markerplace.runtime import run_folder
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import project_with_depth_lookup
+from markerplace.geometry import project_with_depth_lookup
 
 __all__ = ["marker_points", "markers_unoccluded", "markers_in_view"]
 
@@ -31,7 +31,7 @@ def marker_points(world_from_marker: np.ndarray, sizes, grid: int | None = None)
         grid: None: the centre and the 4 black-square corners (S = 5); an integer g: a g x g
             grid over the drawn quad including the white quiet zone (S = g^2).
     """
-    from ..render.tags import outer_size
+    from markerplace.tagfamily import outer_size
 
     T = np.asarray(world_from_marker, dtype=float).reshape(-1, 4, 4)
     M = len(T)

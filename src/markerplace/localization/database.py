@@ -19,10 +19,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..markers import Marker
-from .features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
-from .tags import detect_tags
-from .vlad import VladCodebook
+from markerplace.markers import Marker
+from markerplace.localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
+from markerplace.localization.tags import detect_tags
+from markerplace.localization.vlad import VladCodebook
 
 log = logging.getLogger(__name__)
 

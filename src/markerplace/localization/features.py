@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..geometry import backproject
+from markerplace.geometry import backproject
 
 log = logging.getLogger(__name__)
 

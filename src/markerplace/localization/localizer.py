@@ -32,12 +32,12 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..registry import Registry, configure
-from .database import MapDatabase
-from .features import SIFT_DEFAULT, SiftConfig, extract_sift
-from .pnp import PnPConfig, estimate_pose
-from .tags import TagDetection, detect_tags, pose_from_tag
-from .vlad import nearest_by_similarity
+from markerplace.registry import Registry, configure
+from markerplace.localization.database import MapDatabase
+from markerplace.localization.features import SIFT_DEFAULT, SiftConfig, extract_sift
+from markerplace.localization.pnp import PnPConfig, estimate_pose
+from markerplace.localization.tags import TagDetection, detect_tags, pose_from_tag
+from markerplace.localization.vlad import nearest_by_similarity
 
 log = logging.getLogger(__name__)
 

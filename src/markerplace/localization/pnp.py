@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..geometry import invert, rotation_angle_deg
+from markerplace.geometry import invert, rotation_angle_deg
 
 log = logging.getLogger(__name__)
 

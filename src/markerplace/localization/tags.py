@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..geometry import invert
-from ..markers import FAMILY, Marker
-from .features import to_gray
+from markerplace.geometry import invert
+from markerplace.markers import FAMILY, Marker
+from markerplace.localization.features import to_gray
 
 log = logging.getLogger(__name__)
 

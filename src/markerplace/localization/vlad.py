@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io_utils import write_npz
+from markerplace.runtime.atomic_io import write_npz
 
 log = logging.getLogger(__name__)
 

@@ -36,9 +36,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import UserError
-from .localizability import entropy
-from .placement import MarkerCoverage, apply_coverages
+from markerplace.errors import UserError
+from markerplace.plan.score.localizability import entropy
+from markerplace.plan.place.greedy import MarkerCoverage, apply_coverages
 
 log = logging.getLogger(__name__)
 
@@ -190,9 +190,9 @@ def installed_coverages(scene_spec, world_from_cam: np.ndarray, markers: Sequenc
     """One :class:`MarkerCoverage` per marker (internal frame) over the plan's poses, computed as
     ``prepare`` computes them for ``--existing`` markers (see module docstring); renders depth
     only at the poses that could see one of them."""
-    from ..imaging.engine import EngineSpec, imaging_job
-    from ..imaging.visibility import marker_points
-    from .planner import build_coverages, geometric_visibility
+    from markerplace.imaging.engine import EngineSpec, imaging_job
+    from markerplace.imaging.visibility import marker_points
+    from markerplace.plan.planner import build_coverages, geometric_visibility
 
     if not markers:
         return []

@@ -13,9 +13,9 @@ import logging
 from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
 from pathlib import Path
 
-from ..errors import UserError
-from ..markers import Marker, marker_from_json
-from ..scene.spec import SceneSpec
+from markerplace.errors import UserError
+from markerplace.markers import Marker, marker_from_json
+from markerplace.scene.spec import SceneSpec
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ class PlanFolder:
     def config_in_scene_frame(self, offset):
         """The config with ``discretize.start`` moved into the scene's internal frame (as
         ``plan`` ran it; ``offset`` from :func:`markerplace.scene.worldframe.world_offset`)."""
-        from ..scene.worldframe import points_to_internal
+        from markerplace.scene.worldframe import points_to_internal
 
         start = self.config.discretize.start
         if start is None or not any(offset):
@@ -86,7 +86,7 @@ class PlanFolder:
 
 
 def _read_json(path: Path, what: str) -> dict:
-    from ..jsonfile import read_json
+    from markerplace.jsonfile import read_json
 
     try:
         data = read_json(path)
@@ -100,7 +100,7 @@ def _read_json(path: Path, what: str) -> dict:
 def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
     """Read a plan folder. Raises :class:`UserError` (one line) for a missing folder, a folder
     that is not a finished plan run, or damaged files."""
-    from .planner import PlanConfig
+    from markerplace.plan.planner import PlanConfig
 
     path = Path(path)
     if not path.is_dir():

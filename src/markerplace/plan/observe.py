@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.config import ImagingConfig
-from ..imaging.engine import EngineSpec, imaging_job
-from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from ..imaging.visibility import marker_points
-from ..progress import progress_bar
+from markerplace.imaging.config import ImagingConfig
+from markerplace.imaging.engine import EngineSpec, imaging_job
+from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
+from markerplace.imaging.visibility import marker_points
+from markerplace.progress import progress_bar
 
 log = logging.getLogger(__name__)
 

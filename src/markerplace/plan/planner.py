@@ -17,32 +17,32 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import UserError
-from ..imaging.config import ImagingConfig
-from ..imaging.features import FeatureSet
-from ..io_utils import write_npz
-from ..markers import DEFAULT_TAG_SIZE, FAMILY, Marker
-from ..runtime import cache, run_folder
-from ..runtime.executor import RuntimeConfig, make_executor
-from ..runtime.stages import cached
-from ..render.tags import DRAWING_VERSION
-from ..scene.spec import SceneSpec
-from .discretization import Discretization
-from .discretization import load as load_discretization
-from .discretization import save as save_discretization
-from .discretize import DiscretizeConfig, discretize
-from .localizability import (
+from markerplace.errors import UserError
+from markerplace.imaging.config import ImagingConfig
+from markerplace.imaging.features import FeatureSet
+from markerplace.runtime.atomic_io import write_npz
+from markerplace.markers import DEFAULT_TAG_SIZE, FAMILY, Marker
+from markerplace.runtime import cache, run_folder
+from markerplace.runtime.executor import RuntimeConfig, make_executor
+from markerplace.runtime.stages import cached
+from markerplace.tagfamily import DRAWING_VERSION
+from markerplace.scene.spec import SceneSpec
+from markerplace.plan.discretize.artifact import Discretization
+from markerplace.plan.discretize.artifact import load as load_discretization
+from markerplace.plan.discretize.artifact import save as save_discretization
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
+from markerplace.plan.score.localizability import (
     NoiseConfig,
     entropy,
     information_gain,
     marker_visibility,
     pose_information,
 )
-from .observe import observe
-from .marker_models import MARKER_MODELS, get_marker_model
-from .methods import CALIBRATION_POSES, PLACEMENT_METHODS, method_from_config
-from .placement import MarkerCoverage, apply_coverages, check_k
-from .similarity import SimilarityConfig, count_similar
+from markerplace.plan.observe import observe
+from markerplace.plan.score.marker_models import MARKER_MODELS, get_marker_model
+from markerplace.plan.place.methods import CALIBRATION_POSES, PLACEMENT_METHODS, method_from_config
+from markerplace.plan.place.greedy import MarkerCoverage, apply_coverages, check_k
+from markerplace.plan.similarity.stage import SimilarityConfig, count_similar
 
 log = logging.getLogger(__name__)
 
@@ -53,11 +53,11 @@ class PlacementConfig:
 
     Attributes:
         k: number of markers to place.
-        method: a name in :data:`~markerplace.plan.methods.PLACEMENT_METHODS`: ``omp`` (the
+        method: a name in :data:`~markerplace.plan.place.methods.PLACEMENT_METHODS`: ``omp`` (the
             paper's greedy), ``random`` (seeded uniform sample of candidates) or ``uniform``
             (evenly spaced along the free-space perimeter).
         v: OMP hyper-parameter in [0, 100]: the most visible v percent of candidates compete.
-        marker_model: a name in :data:`~markerplace.plan.marker_models.MARKER_MODELS`:
+        marker_model: a name in :data:`~markerplace.plan.score.marker_models.MARKER_MODELS`:
             ``paper`` (relative-pose factor, as published) or ``corners`` (projected tag
             corners; depends on distance, viewing angle and tag size).
         tag_size: black-square edge of the printed tags, metres: the one home of the tag size
@@ -130,7 +130,7 @@ class PlanData:
             model (:func:`coverages_with_model`).
         calibration: what a calibrated method needs, filled by
             :func:`markerplace.testbed.calibration.calibrate_plan` (e.g. the fitted
-            :class:`~markerplace.plan.success_model.SuccessModel` of ``expected-recall``).
+            :class:`~markerplace.plan.score.success_model.SuccessModel` of ``expected-recall``).
     """
 
     disc: Discretization
@@ -154,7 +154,7 @@ def validate(config: PlanConfig) -> None:
     MARKER_MODELS.lookup(p.marker_model)
     if p.calibration_poses not in CALIBRATION_POSES:
         raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
-    from ..validation import check_plan_config
+    from markerplace.validation import check_plan_config
 
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
 
@@ -171,7 +171,7 @@ def geometric_visibility(world_from_cam: np.ndarray, world_from_markers: np.ndar
 def build_coverages(world_from_cam: np.ndarray, world_from_markers: np.ndarray, sizes: Sequence[float],
                     visible: np.ndarray, config: PlanConfig) -> list:
     """One :class:`MarkerCoverage` per marker pose from the (N, C) visibility mask, with the
-    information of ``config.placement.marker_model`` (:mod:`markerplace.plan.marker_models`)."""
+    information of ``config.placement.marker_model`` (:mod:`markerplace.plan.score.marker_models`)."""
     model = get_marker_model(config.placement.marker_model, noise=config.noise)
     K = config.imaging.camera.K
     covs = []
@@ -201,7 +201,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
             search (None: not checked here).
         before_observe: called with the discretization when the observe stage must run (not
             when its artifact is reused), before anything renders: the run-size check of
-            :func:`markerplace.size_guard.measured_size_check`.
+            :func:`markerplace.pipelines.size_guard.measured_size_check`.
     """
     run_dir = Path(run_dir)
     run_folder.make_dirs(run_dir)
@@ -309,7 +309,7 @@ class Placement:
 
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
     """Choose ``config.k`` markers among the candidates with the method ``config.method``
-    (:func:`~markerplace.plan.methods.method_from_config`), seeded with ``config.seed``.
+    (:func:`~markerplace.plan.place.methods.method_from_config`), seeded with ``config.seed``.
 
     With ``progress``, each OMP pick is logged (candidate, gain) as it is made.
     """

@@ -15,11 +15,11 @@ import logging
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics
-from . import shaders
-from .tags import tag_image
-from .vertices import VERTEX_ATTRS
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics
+from markerplace.render import shaders
+from markerplace.tagfamily import tag_image
+from markerplace.render.vertices import VERTEX_ATTRS
 
 log = logging.getLogger(__name__)
 

@@ -36,11 +36,11 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from ..geometry import Intrinsics, invert
-from ..markers import Marker
-from ..scene.types import Scene
-from .gl_resources import build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
-from .vertices import marker_vertices, part_vertices
+from markerplace.geometry import Intrinsics, invert
+from markerplace.markers import Marker
+from markerplace.scene.types import Scene
+from markerplace.render.gl_resources import build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
+from markerplace.render.vertices import marker_vertices, part_vertices
 
 log = logging.getLogger(__name__)
 

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..markers import Marker
-from ..scene.transparency import OPAQUE_ALPHA, drawn_alpha
-from ..scene.types import MeshPart
-from .tags import outer_size
+from markerplace.markers import Marker
+from markerplace.scene.transparency import OPAQUE_ALPHA, drawn_alpha
+from markerplace.scene.types import MeshPart
+from markerplace.tagfamily import outer_size
 
 __all__ = ["MARKER_OFFSET", "VERTEX_DTYPE", "VERTEX_ATTRS", "part_vertices", "marker_vertices"]
 

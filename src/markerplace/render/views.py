@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import world_from_cam_pose
-from ..io_utils import write_image, write_npy
-from ..scene.types import Scene
+from markerplace.geometry import world_from_cam_pose
+from markerplace.runtime.atomic_io import write_image, write_npy
+from markerplace.scene.types import Scene
 
 EYE_HEIGHT = 1.5
 """Camera height above the floor, metres."""

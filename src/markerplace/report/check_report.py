@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from ..io_utils import atomic_path, fixed, write_json
-from ..runtime import run_folder
+from markerplace.errors import UserError
+from markerplace.runtime.atomic_io import atomic_path, fixed, write_json
+from markerplace.runtime import run_folder
 
 log = logging.getLogger(__name__)
 
@@ -46,13 +46,13 @@ def load_installed(path: str | Path, default_size: float) -> list:
     ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size. The checks of
     :func:`markerplace.markers.load_markers` (JSON guards, integer tag36h11 ids listed once,
     finite rigid poses)."""
-    from ..markers import load_markers
+    from markerplace.markers import load_markers
 
     return load_markers(path, "--installed", default_size=default_size)
 
 
 def _warn_off_wall(scene, markers) -> None:
-    from ..markers import check_markers_on_walls
+    from markerplace.markers import check_markers_on_walls
 
     for m in markers:
         try:
@@ -68,11 +68,11 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
     not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
     folder and the text summary printed by the CLI."""
-    from ..plan import check
-    from ..plan.folder import read_plan_folder
-    from ..plan.planner import prepare
-    from ..runtime.executor import RuntimeConfig, make_executor
-    from ..scene.worldframe import markers_to_internal, world_offset
+    from markerplace.plan import check
+    from markerplace.plan.folder import read_plan_folder
+    from markerplace.plan.planner import prepare
+    from markerplace.runtime.executor import RuntimeConfig, make_executor
+    from markerplace.scene.worldframe import markers_to_internal, world_offset
 
     folder = read_plan_folder(plan_dir)
     installed_user = load_installed(installed_path, folder.config.placement.tag_size)
@@ -107,15 +107,15 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
 
 
 def _user(T, offset):
-    from ..scene.worldframe import poses_to_user
+    from markerplace.scene.worldframe import poses_to_user
 
     return None if T is None else poses_to_user(T, offset)
 
 
 def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
-    from ..scene.worldframe import discretization_to_user
-    from .deliverables import write_known_tag_maps
-    from .figures import floor_map, per_location_mean
+    from markerplace.scene.worldframe import discretization_to_user
+    from markerplace.report.deliverables import write_known_tag_maps
+    from markerplace.report.figures import floor_map, per_location_mean
 
     run_folder.make_dirs(out)
     disc = discretization_to_user(result.disc, offset)

@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..io_utils import atomic_path  # noqa: E402
+from markerplace.runtime.atomic_io import atomic_path  # noqa: E402
 
 MISSING_COLOR = "#ff00ff"
 """Colour of the crosses that mark missing tags (magenta: no colour map here uses it)."""

@@ -17,7 +17,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..io_utils import atomic_path
+from markerplace.runtime.atomic_io import atomic_path
 
 __all__ = ["esc", "data_uri", "png_file_uri", "jpeg_uri", "png_uri", "img", "table", "markdown_to_html", "page",
            "write_page"]
@@ -121,7 +121,7 @@ def _split_row(line: str) -> list[str]:
 
 
 def markdown_to_html(md: str, heading_offset: int = 1) -> str:
-    """The markdown that :mod:`markerplace.report.tables` writes, as HTML: ``#`` headings
+    """The markdown that :mod:`markerplace.testbed.reporting.tables` writes, as HTML: ``#`` headings
     (shifted down by ``heading_offset`` levels), pipe tables (the ``|---|`` line marks the
     header), paragraphs, and inline ``**bold**``, ``*italic*`` and ``code``."""
     lines = md.splitlines()

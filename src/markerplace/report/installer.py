@@ -28,8 +28,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..geometry import Intrinsics, project, world_from_cam_pose
-from ..render.tags import outer_size
+from markerplace.geometry import Intrinsics, project, world_from_cam_pose
+from markerplace.tagfamily import outer_size
 
 __all__ = ["CLOSE_DISTANCE", "WIDE_DISTANCE", "standing_distance", "wide_turn", "InstallerViews", "render_installer_views",
            "draw_outline", "draw_dimension", "Label", "LabelLayout"]
@@ -59,7 +59,7 @@ def standing_distance(caster, occupancy: np.ndarray | None, origin: Sequence[flo
     Args:
         caster: :class:`~markerplace.scene.raycast.RayCaster` of the scene.
         occupancy: (H, W) int8 occupancy layer of the tag's storey (0 = free; see
-            :class:`~markerplace.plan.discretization.Discretization`), or None (rays only).
+            :class:`~markerplace.plan.discretize.artifact.Discretization`), or None (rays only).
         origin / resolution: the grid's lower-left corner (x0, y0) and cell size, metres.
         position: (3,) tag centre; normal: (3,) horizontal wall normal towards the room.
         want: preferred distance, metres.
@@ -333,7 +333,7 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
         origin / resolution: the occupancy grid's lower-left corner and cell size, metres.
         labels: outline label per marker (e.g. ``"#1 id 0"``).
     """
-    from ..render.renderer import Renderer
+    from markerplace.render.renderer import Renderer
 
     views = []
     W, H = IMAGE_SIZE

@@ -3,7 +3,7 @@ is too small.
 
 Units are millimetres on paper (PDF points = mm x 72 / 25.4; reportlab draws in points with
 exact floating-point coordinates). A tag's *sheet* is the drawn square (black square plus the
-white quiet zone, edge :func:`markerplace.render.tags.outer_size`) and, under it, the caption of
+white quiet zone, edge :func:`markerplace.tagfamily.outer_size`) and, under it, the caption of
 :func:`markerplace.report.printable.caption_for` (the caption marks the bottom edge).
 
 Per tag, in placement order:
@@ -33,10 +33,10 @@ import logging
 from pathlib import Path
 from typing import Sequence
 
-from ..io_utils import atomic_path
-from ..render.tags import outer_size
-from .printable import caption_for, tag_modules
-from .sheets import MARGIN_MM, PAPERS_MM, TileLayout, caption_block_mm, check_paper, sheet_advice, sheet_plan
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.tagfamily import outer_size
+from markerplace.report.printable import caption_for, tag_modules
+from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, TileLayout, caption_block_mm, check_paper, sheet_advice, sheet_plan
 
 log = logging.getLogger(__name__)
 

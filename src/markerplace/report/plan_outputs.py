@@ -11,13 +11,13 @@ from typing import Sequence
 
 import numpy as np
 
-from ..runtime.cache import config_dict
-from ..io_utils import atomic_path, write_json, write_npz
-from ..plan.localizability import entropy
-from .figures import floor_map, per_location_mean
-from .instructions import install_to_frame
-from .sheets import sheet_plan
-from .printable import write_tag_sheets
+from markerplace.runtime.cache import config_dict
+from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
+from markerplace.plan.score.localizability import entropy
+from markerplace.report.figures import floor_map, per_location_mean
+from markerplace.report.instructions import install_to_frame
+from markerplace.report.sheets import sheet_plan
+from markerplace.report.printable import write_tag_sheets
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +25,7 @@ log = logging.getLogger(__name__)
 def placement_records(placement, method: str, disc=None) -> list[dict]:
     """One JSON-ready dict per placed marker, in placement order.
 
-    With the run's :class:`~markerplace.plan.discretization.Discretization` ``disc``, each
+    With the run's :class:`~markerplace.plan.discretize.artifact.Discretization` ``disc``, each
     record says what the tag is on: ``surface`` (``"wall"``, ``"column"``, or for a category
     ``--allow`` allowed e.g. ``"bookshelf front"``) and ``surface_part`` (the mesh part's name).
     """
@@ -60,7 +60,7 @@ def plan_instructions(scene, placement, disc, height: float, surfaces: Sequence 
     above the storey's floor map in front of its wall (furniture tops are not floor there), so
     the floor is the tag's z minus ``height``; its storey is its candidate's.
     """
-    from .instructions import install_instructions
+    from markerplace.report.instructions import install_instructions
 
     t0 = time.perf_counter()
     storeys = [int(disc.candidate_storey[int(c)]) for c in placement.candidates]
@@ -76,7 +76,7 @@ def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, m
     """placement.json (markers + summary), placement.csv (the installer's checklist, one row per
     marker: :data:`~markerplace.report.instructions.CHECKLIST_COLUMNS`) and tags/ (one print-ready
     SVG per marker)."""
-    from .instructions import CHECKLIST_COLUMNS, checklist_row
+    from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row
 
     write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": list(records)})
     buf = io.StringIO()
@@ -101,7 +101,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     ``unit_scale``, ``seed`` of the scene argument) go into config.json with the existing markers,
     so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
     (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
-    :class:`~markerplace.plan.exclusion.Exclusion`, user frame) goes there too.
+    :class:`~markerplace.plan.discretize.exclusion.Exclusion`, user frame) goes there too.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -113,7 +113,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     if world_offset is not None and np.any(world_offset):
         from dataclasses import replace
 
-        from ..scene.worldframe import discretization_to_user, markers_to_user
+        from markerplace.scene.worldframe import discretization_to_user, markers_to_user
 
         data = replace(data, disc=discretization_to_user(data.disc, world_offset))
         placement = replace(placement, markers=markers_to_user(placement.markers, world_offset))
@@ -143,7 +143,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     for r, sh in zip(records, sheet_plan(records, paper)):  # where each tag is in tags.pdf
         r["install"].update(pages=sh.pages, tiles=list(sh.tiles))
     write_placement(out_dir, records, scene_source, method, {"summary": summary})
-    from .deliverables import write_deliverables
+    from markerplace.report.deliverables import write_deliverables
 
     write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,

@@ -1,7 +1,7 @@
 """Print-ready tag sheets: one SVG per placed marker, at its exact physical size.
 
 Each file is a vector drawing (millimetre units, so any printer or print shop reproduces the
-size exactly) of the tag36h11 pattern with its white quiet zone (:func:`markerplace.render.tags.
+size exactly) of the tag36h11 pattern with its white quiet zone (:func:`markerplace.tagfamily.
 outer_size`), and below it a caption strip: placement order, tag id, black-square size, where
 it hangs (storey, wall, height, distance along the wall) and "this edge down". The caption is
 outside the quiet zone, so it never touches the pattern, and it marks the tag's bottom edge:
@@ -16,9 +16,9 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from ..io_utils import atomic_path
-from ..render.tags import QUIET_BITS, TAG_BITS, outer_size, tag_image
-from ..runtime import run_folder
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
+from markerplace.runtime import run_folder
 
 
 def tag_modules(tag_id: int) -> np.ndarray:
@@ -80,7 +80,7 @@ def caption_for(record: dict) -> list[str]:
     """Caption lines of a ``placement.json`` marker record: order, id and size; where it hangs
     (from its ``install`` object: storey, wall, height above the floor, distance to the nearer
     corner or door edge); "this edge down" (:func:`markerplace.report.instructions.caption_lines`)."""
-    from .instructions import caption_lines
+    from markerplace.report.instructions import caption_lines
 
     return caption_lines(record)
 

@@ -3,7 +3,7 @@ spot into a downloadable exclusion file for ``plan --exclude``.
 
 The page stays self-contained: one small inline script (no library, no network) keeps the
 rejected spots and rewrites the download link's ``href`` as a ``data:`` URL holding the JSON of
-:mod:`markerplace.plan.exclusion` (``format``, ``scene``, ``spots``: x, y, z in the model's
+:mod:`markerplace.plan.discretize.exclusion` (``format``, ``scene``, ``spots``: x, y, z in the model's
 frame as placement.json has them, ``radius`` half the tag size, ``order``, ``tag_id``,
 ``note``). ``plan SCENE --out SAME_FOLDER --exclude rejected.json`` then replans from the cached
 stages and prints what changed.
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 
-from .html import esc
+from markerplace.report.html import esc
 
 __all__ = ["surface_line", "reject_button", "review_box", "REVIEW_SCRIPT"]
 

@@ -31,7 +31,7 @@ a facing viewer's right, y up):
   two tag frames are one physical frame under two names (a tf2 frame has one parent).
 
 Numbers are written with Python's shortest round-trip repr (never ``-0.0``:
-:func:`markerplace.io_utils.clean_float` without rounding), so reading a file back gives the
+:func:`markerplace.runtime.atomic_io.clean_float` without rounding), so reading a file back gives the
 poses to the last bit of the quaternion / rotation-vector conversion (well under 1e-9).
 """
 
@@ -43,7 +43,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..io_utils import atomic_path, clean_float, clean_numbers
+from markerplace.runtime.atomic_io import atomic_path, clean_float, clean_numbers
 
 MARKER_FROM_WPILIB = np.array([[0.0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
 """(4, 4) pose of WPILib's tag frame in markerplace's marker frame: WPILib x = marker z (out of

@@ -28,7 +28,7 @@ from typing import Any, Callable, TypeVar
 
 import numpy as np
 
-from ..io_utils import write_json
+from markerplace.runtime.atomic_io import write_json
 
 log = logging.getLogger(__name__)
 

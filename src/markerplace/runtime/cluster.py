@@ -15,7 +15,7 @@ import socket
 import struct
 import time
 
-from ..errors import UserError
+from markerplace.errors import UserError
 
 __all__ = ["CLUSTER_SCHEMES", "SCHEDULER_TIMEOUT_S", "HANDSHAKE_MAX_BYTES", "usable_cpus", "parse_cluster",
            "check_scheduler"]

@@ -25,7 +25,7 @@ PACKAGES = ("markerplace", "numpy", "scipy", "opencv-python-headless", "faiss-cp
 def gl_info() -> dict[str, str]:
     """``GL_RENDERER`` and ``GL_VERSION`` of a standalone EGL context (e.g. llvmpipe, Mesa's
     version); ``{"error": ...}`` when no context can be made."""
-    from ..render.gl_resources import create_context
+    from markerplace.render.gl_resources import create_context
 
     try:
         ctx = create_context()

@@ -33,9 +33,9 @@ import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
-from ..errors import UserError
-from .cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
-from .workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
+from markerplace.errors import UserError
+from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
+from markerplace.runtime.workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ and ``.markerplace-run.lock`` (:mod:`markerplace.runtime.run_lock`): one run per
 
 Nothing is written or deleted through a symbolic link below the folder: a link to a folder (or
 a dangling one) in it is refused at open, and each write or deletion checks the path again.
-Files are replaced with ``os.replace`` (:func:`markerplace.io_utils.atomic_path` calls
+Files are replaced with ``os.replace`` (:func:`markerplace.runtime.atomic_io.atomic_path` calls
 :func:`prepare_write`), which replaces a link itself, never its target. A run that wrote
 nothing leaves the folder as it found it (bookkeeping removed; the folder too if it made it).
 Outside every open run folder (library use, ``render --out PREFIX``) files are written as
@@ -29,8 +29,8 @@ import time
 from pathlib import Path
 from typing import Iterable
 
-from ..errors import UserError, write_error
-from .run_lock import RunLock
+from markerplace.errors import UserError, write_error
+from markerplace.runtime.run_lock import RunLock
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +143,7 @@ class RunFolder:
         if marker.is_file() and not marker.is_symlink():
             return
         foreign = len(set(os.listdir(self.real)) - set(BOOKKEEPING))
-        from .. import __version__
+        from markerplace import __version__
 
         text = json.dumps({"markerplace_run": 1, "version": __version__, "command": command, "adopted": bool(foreign),
                            "created": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n"
@@ -277,7 +277,7 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
             without the marker (and not ``adopt``); a link to a folder inside it; a folder that
             cannot be written; a folder another run holds (naming its pid).
     """
-    from ..output_checks import check_output_dir
+    from markerplace.output_checks import check_output_dir
 
     given = Path(path)
     if given.is_symlink() and not given.exists():
@@ -352,7 +352,7 @@ def _locate(path) -> tuple[RunFolder | None, str]:
 
 def prepare_write(path) -> Path:
     """Make ``path``'s folder and claim ``path`` before a write (called by
-    :func:`markerplace.io_utils.atomic_path`). Inside a run folder: refuses links on the way, a
+    :func:`markerplace.runtime.atomic_io.atomic_path`). Inside a run folder: refuses links on the way, a
     folder at ``path`` and a file markerplace did not write, and records ``path`` in the
     manifest. Returns the path to write (links above the run folder resolved)."""
     folder, rel = _locate(path)

@@ -18,7 +18,7 @@ import socket
 import time
 from pathlib import Path
 
-from ..errors import UserError, write_error
+from markerplace.errors import UserError, write_error
 
 log = logging.getLogger(__name__)
 

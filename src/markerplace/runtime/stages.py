@@ -22,8 +22,8 @@ import time
 from pathlib import Path
 from typing import Callable, Sequence, TypeVar
 
-from . import cache
-from .interrupt import raise_if_stopping
+from markerplace.runtime import cache
+from markerplace.runtime.interrupt import raise_if_stopping
 
 log = logging.getLogger(__name__)
 

@@ -114,7 +114,7 @@ def spawn_pool(workers: int, initializer: Callable, initargs: tuple) -> Iterator
     an exception in the ``with`` body the pool is terminated (its stop event set, workers sent
     SIGTERM), not joined.
     """
-    from .interrupt import deferred
+    from markerplace.runtime.interrupt import deferred
 
     ctx = mp.get_context("spawn")
     stop = ctx.Event()

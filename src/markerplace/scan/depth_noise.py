@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Intrinsics
+from markerplace.geometry import Intrinsics
 
 DEPTH_SCALE = 1000.0
 """Simulated depth images are stored in millimetres."""

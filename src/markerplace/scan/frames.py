@@ -39,12 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics
-from ..io_utils import atomic_path
-from .frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.scan.frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
                        read_intrinsics)
-from .tum import TUM_MAX_DT, read_tum
+from markerplace.scan.tum import TUM_MAX_DT, read_tum
 
 log = logging.getLogger(__name__)
 
@@ -177,7 +177,7 @@ class FrameWriter:
     """
 
     def __init__(self, root: str | Path, intrinsics: Intrinsics, depth_scale: float = MARKERPLACE_DEPTH_SCALE):
-        from ..io_utils import write_json
+        from markerplace.runtime.atomic_io import write_json
 
         self.root = Path(root)
         self.intrinsics = intrinsics
@@ -191,7 +191,7 @@ class FrameWriter:
         """Write one frame: rgb (H, W, 3) uint8, depth (H, W) uint16 in ``depth_scale`` units, (4, 4) pose."""
         import cv2
 
-        from ..io_utils import write_image
+        from markerplace.runtime.atomic_io import write_image
 
         if not FRAME_NAME_RE.match(name):
             raise ValueError(f"bad frame name {name!r}")

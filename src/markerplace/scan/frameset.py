@@ -25,8 +25,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics
 
 ROTATION_TOLERANCE = 2e-3
 """Largest accepted entry of |R^T R - I| of a pose rotation."""
@@ -126,7 +126,7 @@ def read_intrinsics(path: Path, default_depth_scale: float) -> tuple[Intrinsics,
     Returns:
         (intrinsics, depth units per metre).
     """
-    from ..jsonfile import read_json
+    from markerplace.jsonfile import read_json
 
     path = Path(path)
     if not path.is_file():

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics, invert
-from ..io_utils import atomic_path
-from ..progress import track
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics, invert
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.progress import track
 
 log = logging.getLogger(__name__)
 
@@ -212,7 +212,7 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     Raises:
         UserError: a bad image (see :func:`~markerplace.scan.frames.load_frame`), or no surface.
     """
-    from .frames import load_frame
+    from markerplace.scan.frames import load_frame
 
     config.validate()
     frames = fs.frames[:: int(config.every)]

@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics
-from ..progress import track
-from ..scene.types import Scene
-from .depth_noise import DEPTH_SCALE, DepthNoiseConfig, camera_rays, noisy_depth, to_depth_png
-from .fuse import FuseConfig, TSDFFusion
-from .walk import WalkConfig, plan_walk, seeded_rng
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics
+from markerplace.progress import track
+from markerplace.scene.types import Scene
+from markerplace.scan.depth_noise import DEPTH_SCALE, DepthNoiseConfig, camera_rays, noisy_depth, to_depth_png
+from markerplace.scan.fuse import FuseConfig, TSDFFusion
+from markerplace.scan.walk import WalkConfig, plan_walk, seeded_rng
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ class FrameSimulator:
     """
 
     def __init__(self, scene: Scene, config: ScanConfig = ScanConfig()):
-        from ..render.renderer import Renderer
+        from markerplace.render.renderer import Renderer
 
         self.config = config
         self.intrinsics = config.intrinsics
@@ -171,7 +171,7 @@ def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0
     Returns:
         :class:`ScanResult`.
     """
-    from .frames import FrameWriter
+    from markerplace.scan.frames import FrameWriter
 
     t0 = time.perf_counter()
     config.fuse.validate()

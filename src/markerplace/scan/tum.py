@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import Intrinsics
-from .frameset import FrameRecord, FrameSet, data_lines, parse_numbers, read_intrinsics
+from markerplace.errors import UserError
+from markerplace.geometry import Intrinsics
+from markerplace.scan.frameset import FrameRecord, FrameSet, data_lines, parse_numbers, read_intrinsics
 
 log = logging.getLogger(__name__)
 

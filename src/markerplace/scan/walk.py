@@ -22,9 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import rotation_from_yaw
-from ..scene.types import Room, Scene
+from markerplace.errors import UserError
+from markerplace.geometry import rotation_from_yaw
+from markerplace.scene.types import Room, Scene
 
 log = logging.getLogger(__name__)
 
@@ -177,7 +177,7 @@ def plan_walk(scene: Scene, cfg: WalkConfig = WalkConfig(), seed: int = 0) -> tu
     Raises:
         UserError: the scene has no rooms, or no feasible position at all.
     """
-    from ..scene.raycast import RayCaster
+    from markerplace.scene.raycast import RayCaster
 
     if not scene.rooms:
         raise UserError(f"scene {scene.name!r} has no rooms: a simulated scan needs a built-in scene")

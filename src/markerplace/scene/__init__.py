@@ -1,7 +1,7 @@
 """Scenes: load a mesh file or build a procedural interior, always z up and in metres.
 
 Public entry point: :func:`load_scene`. Built-in scenes are listed by
-:func:`markerplace.scene.catalogue.list_scenes`; :func:`markerplace.scene.export.export_glb`
+:func:`markerplace.scene.builtin.catalogue.list_scenes`; :func:`markerplace.scene.export.export_glb`
 writes any scene as a standard binary glTF.
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from ..errors import UserError
-from .types import MeshPart, Room, Scene
+from markerplace.errors import UserError
+from markerplace.scene.types import MeshPart, Room, Scene
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +34,8 @@ def load_scene(spec: str, up: str | None = None, unit_scale: float | None = None
     Raises:
         UserError: unknown name, missing or unreadable file, implausible units.
     """
-    from .catalogue import builtin_names, get_builtin
-    from .loader import SUPPORTED_EXTENSIONS, load_mesh_file
+    from markerplace.scene.builtin.catalogue import builtin_names, get_builtin
+    from markerplace.scene.loader import SUPPORTED_EXTENSIONS, load_mesh_file
 
     key = str(spec).strip()
     if key.lower() in builtin_names() and not Path(key).is_file():

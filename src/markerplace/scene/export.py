@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io_utils import atomic_path
-from .transparency import drawn_alpha
-from .types import Scene
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.scene.transparency import drawn_alpha
+from markerplace.scene.types import Scene
 
 log = logging.getLogger(__name__)
 

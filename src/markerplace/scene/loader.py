@@ -42,12 +42,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from .worldframe import OFFSET_KEY
-from . import sanity
-from .mesh_text import decode_text, original_names
-from .transparency import material_transparency, read_gltf_json
-from .types import MeshPart, Scene
+from markerplace.errors import UserError
+from markerplace.scene.worldframe import OFFSET_KEY
+from markerplace.scene import sanity
+from markerplace.scene.mesh_text import decode_text, original_names
+from markerplace.scene.transparency import material_transparency, read_gltf_json
+from markerplace.scene.types import MeshPart, Scene
 
 log = logging.getLogger(__name__)
 

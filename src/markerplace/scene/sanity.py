@@ -22,8 +22,8 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from ..errors import UserError
-from .mesh_text import decode_text, original_names
+from markerplace.errors import UserError
+from markerplace.scene.mesh_text import decode_text, original_names
 
 log = logging.getLogger("markerplace.scene.loader")
 

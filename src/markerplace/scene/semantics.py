@@ -6,7 +6,7 @@ node, mesh and material names (``RoomWindow_3``, ``FoldingDoor_1``, ``Curtain_2`
 ``window.001``, ``Bookcase``), IFC classes carried into node names by ``scripts/ifc_to_glb.py``
 (``IfcWindow_1234_0``), and the procedural scenes' labels (``bookshelf``, ``door``).
 :func:`classify` reads them with the word list below; the candidate rules of
-:mod:`markerplace.plan.wall_candidates` drop spots on the categories the user does not allow
+:mod:`markerplace.plan.discretize.wall_candidates` drop spots on the categories the user does not allow
 (``plan --allow``, docs/cli.md).
 
 Matching (:func:`words_of`, :func:`classify`):
@@ -29,7 +29,7 @@ Matching (:func:`words_of`, :func:`classify`):
   :data:`STRUCTURE` words (wall, column, ...) count only when no category is named.
 
 The names a file gives are guesses by whoever made it; the geometric rules of
-:mod:`markerplace.plan.wall_candidates` catch what no name says.
+:mod:`markerplace.plan.discretize.wall_candidates` catch what no name says.
 """
 
 from __future__ import annotations

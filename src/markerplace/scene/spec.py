@@ -18,6 +18,6 @@ class SceneSpec:
     seed: int = 0
 
     def load(self):
-        from . import load_scene
+        from markerplace.scene import load_scene
 
         return load_scene(self.spec, up=self.up, unit_scale=self.unit_scale, seed=self.seed)

@@ -81,7 +81,7 @@ _DISC_FIELDS = {"locations": "xy", "location_z": "z", "world_from_cam": "pose",
 
 
 def discretization_to_user(disc, offset: np.ndarray):
-    """A :class:`~markerplace.plan.discretization.Discretization` with every position in the user frame
+    """A :class:`~markerplace.plan.discretize.artifact.Discretization` with every position in the user frame
     (locations, heights, poses, candidates, grid origin, storey floors, scan points)."""
     from dataclasses import fields
 

@@ -12,7 +12,7 @@ never touch a fit.
 * :func:`calibrate_plan` fills ``PlanData.calibration`` for every calibrated placement method
   (``expected-recall``): the map images are localized without tags and with
   ``calibration_runs`` seeded random sets of ``calibration_k`` candidate tags, and a
-  :class:`~markerplace.plan.success_model.SuccessModel` is fitted on the pairs (score under the
+  :class:`~markerplace.plan.score.success_model.SuccessModel` is fitted on the pairs (score under the
   method's marker model, success): every map image without tags, plus with each set the images
   whose score the set changes (the sets are distinct). Cached in the plan folder
   (``calibration/``, ``success_model_<method>.json``); the localizer has the testbed's default
@@ -28,7 +28,7 @@ never touch a fit.
   sees few failures.
 * :func:`score_outcomes` gives, for ``evaluate --calibration``, the same pairs for every evaluated
   placement made of candidates and for each marker model, from which
-  :mod:`markerplace.report.calibration_report` draws calibration curves and AUCs.
+  :mod:`markerplace.testbed.reporting.calibration` draws calibration curves and AUCs.
 
 Existing markers (``plan --existing``) are left out of the calibration renders.
 """
@@ -42,16 +42,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.engine import marker_key
-from ..io_utils import write_json
-from ..markers import FAMILY, Marker
-from ..runtime import cache
-from ..runtime.stages import cached
-from .images import BaseImages, TestbedImaging
-from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
-from .metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from .placements import NO_MARKERS, PlacementRun, candidate_of
-from .predict import ImageSet, predict_placements
+from markerplace.imaging.engine import marker_key
+from markerplace.runtime.atomic_io import write_json
+from markerplace.markers import FAMILY, Marker
+from markerplace.runtime import cache
+from markerplace.runtime.stages import cached
+from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
+from markerplace.testbed.predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ def offgrid_poses(data, grid_spacing: float, num: int, seed: int):
     """``num`` test-like calibration poses (:class:`~markerplace.testbed.poses.TestPoses`): feasible
     poses drawn uniformly, perturbed like test poses, in free space, from stream
     :data:`OFFGRID_STREAM` of ``seed`` (never the test images: those use stream 0)."""
-    from . import poses as tp
+    from markerplace.testbed import poses as tp
 
     tcfg = tp.TestPoseConfig(num=num, mode="uniform", seed=seed, stream=OFFGRID_STREAM)
     return tp.sample_test_poses(np.asarray(data.disc.world_from_cam, float), data.base_score, grid_spacing, tcfg,
@@ -122,8 +122,8 @@ def placement_candidates(markers, candidate_world_from_marker: np.ndarray, tag_s
 def scores_with(data, coverages: list, candidates: np.ndarray) -> np.ndarray:
     """(N,) score ``-H`` of every pose with the given candidates' tags (``coverages``: per
     candidate, e.g. under another marker model; existing markers not added)."""
-    from ..plan.localizability import entropy
-    from ..plan.placement import apply_coverages
+    from markerplace.plan.score.localizability import entropy
+    from markerplace.plan.place.greedy import apply_coverages
 
     return -entropy(apply_coverages(data.base_info, [coverages[int(c)] for c in candidates]))
 
@@ -166,10 +166,10 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
             (:mod:`markerplace.testbed.map_setup`).
         imaging_config: the testbed's imaging (default: the plan's camera, OpenCV SIFT).
     """
-    from ..plan.methods import PLACEMENT_METHODS, method_named
-    from ..plan.planner import coverages_with_model
-    from ..plan.success_model import SuccessModel, fit_success_model
-    from .config import LocalizationConfig
+    from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
+    from markerplace.plan.planner import coverages_with_model
+    from markerplace.plan.score.success_model import SuccessModel, fit_success_model
+    from markerplace.testbed.config import LocalizationConfig
 
     names = [plan_config.placement.method] if methods is None else list(methods)
     run_dir = Path(run_dir)
@@ -248,7 +248,7 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
     Args:
         data: the prepared plan.
         plan_config: the plan's settings.
-        placements: evaluated :class:`~markerplace.testbed.placements.PlacementRun` list.
+        placements: evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
         success: (method, run, k) -> (N,) map-image successes (:func:`map_successes`).
         models: marker model names.
 
@@ -256,7 +256,7 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
         model name -> dict with ``score``, ``success``, ``tagged`` arrays and ``placements``
         (the (method, run, k) keys used).
     """
-    from ..plan.planner import coverages_with_model
+    from markerplace.plan.planner import coverages_with_model
 
     sets = {}
     for p in placements:

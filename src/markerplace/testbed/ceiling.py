@@ -29,9 +29,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..markers import FAMILY, Marker
-from .metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from .placements import NO_MARKERS, RESERVED_NAMES, PlacementRun
+from markerplace.markers import FAMILY, Marker
+from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun
 
 log = logging.getLogger(__name__)
 
@@ -225,14 +225,14 @@ def ceiling_markdown(rows: list[dict], estimate: dict, ks: Sequence[int], thresh
 
     Args:
         rows: the evaluation's recall rows (``test_set``, ``method``, ``k``, ``threshold``,
-            ``recall`` in [0, 1], ``n_tests``), as :func:`~markerplace.testbed.report.write_outputs` returns.
+            ``recall`` in [0, 1], ``n_tests``), as :func:`~markerplace.testbed.reporting.summary.write_outputs` returns.
         estimate: test set -> k -> images localized by no markers or one pick alone
             (:func:`ceiling_placements`).
         ks: marker budgets (columns).
         threshold_label: the recall threshold the table reports (e.g. ``5cm/5deg``).
         held_out: :func:`held_out_estimate`, or None to leave its rows out.
     """
-    from .placements import baseline_methods
+    from markerplace.testbed.marker_sets import baseline_methods
 
     def recall(ts, method, k):
         vals = [r["recall"] for r in rows if r["test_set"] == ts and r["method"] == method and r["k"] == k

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..errors import UserError
-from .metrics import THRESHOLDS
-from .placements import NO_MARKERS, method_names
-from .poses import TEST_SETS
+from markerplace.errors import UserError
+from markerplace.testbed.metrics import THRESHOLDS
+from markerplace.testbed.marker_sets import NO_MARKERS, method_names
+from markerplace.testbed.poses import TEST_SETS
 
 __all__ = ["TestSetConfig", "StudyConfig", "LocalizationConfig", "DiagnosticsConfig", "EvaluateConfig", "validate_evaluate_config"]
 
@@ -132,8 +132,8 @@ TAG_IDS = ("order", "candidate")
 
 def validate_evaluate_config(config: EvaluateConfig) -> None:
     """Raise :class:`UserError` (one line) for settings that cannot work."""
-    from ..localization.localizer import LOCALIZERS
-    from ..validation import check_evaluate_config
+    from markerplace.localization.localizer import LOCALIZERS
+    from markerplace.validation import check_evaluate_config
 
     sets, methods = config.test.sets, config.study.methods
     if not sets or any(t not in TEST_SETS for t in sets):

@@ -7,7 +7,7 @@
 5. the VLAD codebook of the marker-free map;
 6. per placement: its map (only images with one of its markers in view are re-rendered) and
    the predictions of every test set (query images with its markers in view re-rendered);
-7. metrics from the predictions (:mod:`markerplace.testbed.report`).
+7. metrics from the predictions (:mod:`markerplace.testbed.reporting.summary`).
 
 Every stage is cached with the hash of its inputs (:mod:`markerplace.runtime.stages`); an
 interrupted run resumes where it stopped. Per-image work runs on one executor for the whole
@@ -23,18 +23,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.engine import marker_key
-from ..runtime import cache, run_folder
-from ..runtime.executor import make_executor
-from ..runtime.stages import cached
-from ..io_utils import atomic_path
-from .calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
-from .ceiling import (SINGLE, ceiling_markdown, ceiling_placements, held_out_estimate, single_placements,
+from markerplace.imaging.engine import marker_key
+from markerplace.runtime import cache, run_folder
+from markerplace.runtime.executor import make_executor
+from markerplace.runtime.stages import cached
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.testbed.calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
+from markerplace.testbed.ceiling import (SINGLE, ceiling_markdown, ceiling_placements, held_out_estimate, single_placements,
                       single_tag_outcomes)
-from .images import BaseImages, TestbedImaging
-from .map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
-from .metrics import main_threshold, threshold_label
-from .predict import ImageSet, predict_placements
+from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+from markerplace.testbed.metrics import main_threshold, threshold_label
+from markerplace.testbed.predict import ImageSet, predict_placements
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ class EvaluationResult:
     """What :func:`run_evaluation` returns.
 
     Attributes:
-        rows: the recall rows (see :mod:`markerplace.report.tables`).
+        rows: the recall rows (see :mod:`markerplace.testbed.reporting.tables`).
         summary: markdown of the main tables (recall at the main threshold per test set).
         timings: seconds per stage.
     """
@@ -57,7 +57,7 @@ class EvaluationResult:
 
 
 def _test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
-    from . import poses as tp
+    from markerplace.testbed import poses as tp
 
     map_poses = np.asarray(data.disc.world_from_cam, float)
     is_free = tp.free_space_of(data.disc, config.test.min_clearance)
@@ -98,12 +98,12 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         extra_placements: more marker sets evaluated as methods: name -> markers in the
             internal (scene) frame.
     """
-    from ..io_utils import write_json
-    from ..markers import load_markers
-    from ..plan.planner import prepare, validate
-    from .config import validate_evaluate_config
-    from .placements import build_placements, find_placement_files, with_candidate_ids
-    from .report import write_outputs
+    from markerplace.runtime.atomic_io import write_json
+    from markerplace.markers import load_markers
+    from markerplace.plan.planner import prepare, validate
+    from markerplace.testbed.config import validate_evaluate_config
+    from markerplace.testbed.marker_sets import build_placements, find_placement_files, with_candidate_ids
+    from markerplace.testbed.reporting.summary import write_outputs
 
     t_all = time.perf_counter()
     validate_evaluate_config(config)
@@ -130,7 +130,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         t0 = time.perf_counter()
         extra = dict(extra_placements or {})
         if placements_dir is not None:
-            from ..scene.worldframe import markers_to_internal, world_offset
+            from markerplace.scene.worldframe import markers_to_internal, world_offset
 
             # placement files are in the user's (file) frame; the scene may be recentred
             extra.update({name: markers_to_internal(load_markers(p), world_offset(scene))
@@ -191,7 +191,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
             tmp.write_text(ceiling_markdown(rows, estimate, sorted(set(config.study.ks)),
                                             threshold_label(threshold), held_out))
     if diag.calibration:
-        from ..report.calibration_report import write_calibration_report
+        from markerplace.testbed.reporting.calibration import write_calibration_report
 
         write_calibration_report(out, scene.name, score_outcomes(data, plan_config, placements,
                                                                   map_successes(predictions, map_poses)))

@@ -18,13 +18,13 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from ..imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
-from ..imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from ..imaging.visibility import marker_points
-from ..io_utils import write_npy
-from ..markers import Marker
-from ..progress import progress_bar
-from ..runtime import cache, run_folder
+from markerplace.imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
+from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
+from markerplace.imaging.visibility import marker_points
+from markerplace.runtime.atomic_io import write_npy
+from markerplace.markers import Marker
+from markerplace.progress import progress_bar
+from markerplace.runtime import cache, run_folder
 
 log = logging.getLogger(__name__)
 

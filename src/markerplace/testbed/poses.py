@@ -20,9 +20,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import UserError
-from ..geometry import world_from_cam_poses
-from ..io_utils import write_npz
+from markerplace.errors import UserError
+from markerplace.geometry import world_from_cam_poses
+from markerplace.runtime.atomic_io import write_npz
 
 TEST_SETS = ("weighted", "uniform")
 
@@ -166,7 +166,7 @@ def free_space_checker(occupancy: np.ndarray, origin: Sequence[float], resolutio
 
 
 def free_space_of(disc, min_clearance: float) -> Callable[..., np.ndarray]:
-    """:func:`free_space_checker` of a discretization (``markerplace.plan.discretization``): its
+    """:func:`free_space_checker` of a discretization (``markerplace.plan.discretize.artifact``): its
     occupancy grids, one layer per planned storey, each feasible pose checked on its own storey."""
     layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
     return free_space_checker(disc.occupancy, disc.grid_origin, disc.grid_resolution, min_clearance,

@@ -24,14 +24,14 @@ from typing import Sequence
 
 import numpy as np
 
-from ..imaging.features import ImageFeatures
-from ..render.tags import DRAWING_VERSION
-from ..runtime import cache, run_folder
-from .images import BaseImages, TestbedImaging
-from .maps import localize_task, save_map
-from .placements import NO_MARKERS
-from .predictions import load_prediction, save_prediction
-from .render_store import RenderStore
+from markerplace.imaging.features import ImageFeatures
+from markerplace.tagfamily import DRAWING_VERSION
+from markerplace.runtime import cache, run_folder
+from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.maps import localize_task, save_map
+from markerplace.testbed.marker_sets import NO_MARKERS
+from markerplace.testbed.prediction_store import load_prediction, save_prediction
+from markerplace.testbed.render_store import RenderStore
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +87,7 @@ class Retrieval:
     def candidates(self, vlad: np.ndarray, query: np.ndarray, exclude: Sequence[int] = ()) -> tuple:
         """The localizer's VLAD-only retrieval of ``query`` against the rows of ``vlad``,
         leaving out ``exclude`` (as :meth:`~markerplace.localization.localizer.Localizer.retrieve`)."""
-        from ..localization.vlad import nearest
+        from markerplace.localization.vlad import nearest
 
         skip = set(int(i) for i in exclude)
         order = nearest(vlad, query, self.n + len(skip))[0]
@@ -272,7 +272,7 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
 
     Args:
         tb: the testbed's imaging (and executor).
-        placements: :class:`~markerplace.testbed.placements.PlacementRun` list; the marker-free
+        placements: :class:`~markerplace.testbed.marker_sets.PlacementRun` list; the marker-free
             one (``none``) first, so that the others can reuse its results. A placement with
             ``test_sets`` is localized on those sets only (``map`` is always localized).
         map_base: marker-free map features.
@@ -289,13 +289,13 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
     Returns:
         (method, run, k, set name) -> (Q, 4, 4) estimates, NaN where localization failed.
     """
-    from ..localization.localizer import LOCALIZERS
+    from markerplace.localization.localizer import LOCALIZERS
 
     pred_dir = cache_dir / "predictions"
     timings.setdefault("map_with_markers", 0.0)
     timings.setdefault("localize", 0.0)
     predictions: dict[tuple, np.ndarray] = {}
-    from ..registry import configure
+    from markerplace.registry import configure
 
     name, settings = lcfg
     conf = configure(LOCALIZERS.lookup(name).default_conf, dict(settings))

@@ -21,9 +21,9 @@ from typing import Iterable
 
 import numpy as np
 
-from ..imaging.features import FeatureSet, ImageFeatures
-from ..io_utils import atomic_path
-from ..runtime import run_folder
+from markerplace.imaging.features import FeatureSet, ImageFeatures
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.runtime import run_folder
 
 log = logging.getLogger(__name__)
 

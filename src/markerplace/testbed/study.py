@@ -13,7 +13,7 @@ Groups (one setting changed from the default each; recall at the main threshold)
 * ``size``: every OMP tag printed at 0.5, 0.75, 1.25 times its planned size.
 
 Every row that shares the default's test images gets the paired difference to the default per
-k with a 95 % bootstrap interval (:func:`markerplace.report.paired.bootstrap_difference`).
+k with a 95 % bootstrap interval (:func:`markerplace.testbed.reporting.paired.bootstrap_difference`).
 Outputs: ``study.md`` (the tables), ``study.csv`` (every recall), ``study_<group>.png`` (recall
 vs k per group), and one folder per evaluation (``runs/<name>/``, each with its own tables).
 """
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io_utils import atomic_path
-from .config import DiagnosticsConfig, validate_evaluate_config
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +56,7 @@ class StudyPlan:
 
 def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
     """(method, run, k) -> (n,) bool hits of one evaluation at ``threshold`` for ``test_set``."""
-    from .metrics import hit_mask
+    from markerplace.testbed.metrics import hit_mask
 
     with np.load(run_dir / "query_errors.npz", allow_pickle=False) as z:
         methods, runs, ks = z[f"{test_set}_method"], z[f"{test_set}_run"], z[f"{test_set}_k"]
@@ -66,7 +66,7 @@ def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
 
 def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress: bool) -> dict:
     """OMP placements with the other v values and without similarity (internal frame)."""
-    from ..plan.planner import place, prepare
+    from markerplace.plan.planner import place, prepare
 
     k = plan_config.placement.k
     data = prepare(scene_spec, plan_config, work / "plan", progress=progress, k=k)
@@ -125,8 +125,8 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
         plan: what the study varies.
         progress: progress bars.
     """
-    from .experiment import run_evaluation
-    from .metrics import main_threshold, threshold_label
+    from markerplace.testbed.experiment import run_evaluation
+    from markerplace.testbed.metrics import main_threshold, threshold_label
 
     out = Path(out_dir)
     work = out / "work"
@@ -180,7 +180,7 @@ def _groups(hits: dict, plan: StudyPlan, v_default: float) -> list[tuple[str, li
 
 
 def _markdown(groups: list, default: dict, ks: list, label: str, seed: int) -> str:
-    from ..report.paired import bootstrap_difference, format_difference
+    from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference
 
     cols = [0] + ks
     lines = [f"# Parameter and sensitivity study: recall at {label} (%)", "",
@@ -220,7 +220,7 @@ def _write_csv(path: Path, groups: list, ks: list) -> None:
 
 
 def _figures(out: Path, groups: list, ks: list, label: str) -> None:
-    from ..report.figures import recall_vs_k
+    from markerplace.report.figures import recall_vs_k
 
     cols = [0] + ks
     for group, rows in groups:

@@ -1,0 +1,1 @@
+"""Whole commands as short chains of named stages: plan, evaluate, check."""

@@ -1,0 +1,1 @@
+"""Place stage: k tags chosen among the candidates by a named placement method."""

@@ -1,0 +1,363 @@
+"""Marker placement: OMP greedy, plain and lazy (the algorithm; the random and uniform baselines
+are in :mod:`markerplace.plan.place.baselines`; :mod:`markerplace.plan.place.methods` makes them placement
+methods chosen by name).
+
+The problem is given as information matrices: ``base_info`` (N, 6, 6), the information of every
+feasible camera pose without markers (see :mod:`markerplace.plan.score.localizability`), and per candidate
+marker m a :class:`MarkerCoverage`, the sparse set of poses that see it with the information
+``M`` (6, 6) it adds there. Everything below is exact arithmetic on these arrays; no scene.
+
+Definitions (paper, Methods; docs/design.md section 5)
+-------------------------------------------------
+* Information gain at pose c: ``I(m, c) = 1/2 [ln det(Lambda_c + M_cm) - ln det(Lambda_c)]``,
+  0 where m is not seen.
+* Localizability gain ``g(m | S)``: the q-th percentile over ALL N feasible poses of I(m, .),
+  with the paper's ``inf{i : F_I(i) >= q/100}`` (numpy's ``method="inverted_cdf"``).
+* ``P_m = 100 |C_m| / N`` where ``C_m`` are the poses in m's coverage (entries with all-zero
+  information are dropped by :meth:`MarkerCoverage.from_dense`), and
+  ``q = 100 - p*`` with ``p* = inf{p in [0, 100] : F_P(p) >= (100 - v)/100}``.
+
+Tie and eligibility rules (exact, so plain and lazy greedy agree bit for bit)
+-----------------------------------------------------------------------------
+* Eligible candidates are those with ``P_m > p*`` (strictly above). This is exactly the set
+  whose q-th percentile gain can be nonzero (a candidate with ``P_m <= p*`` has at least a
+  fraction q/100 of zeros), so for v in (0, 100] it is "the most visible v percent". For
+  v = 100, ``p* = 0`` (the infimum over [0, 100]) and every candidate seen by some pose is
+  eligible.
+* Each round picks the eligible candidate with the largest ``g(m | S)``; equal gains go to the
+  smallest candidate index. Only when no eligible candidate is left are ineligible ones picked,
+  ranked by their mean information gain over all N poses (their q-th percentile gain is 0),
+  again ties to the smallest index.
+* Both keys only shrink as markers are placed (per-pose gains shrink as Lambda grows; a
+  percentile and a mean are monotone in every element), so stale keys are upper bounds and
+  the lazy greedy returns exactly the plain greedy's sequence.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from markerplace.errors import UserError
+from markerplace.plan.score.localizability import information_gain_whitened, whitening
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerCoverage:
+    """Poses that see one candidate marker and the information the marker adds there.
+
+    Attributes:
+        pose_idx: (n_m,) int, distinct indices into the feasible poses.
+        info: (n_m, 6, 6) symmetric PSD information ``M`` per seeing pose, camera tangent
+            space (omega, nu), 1/rad^2 and 1/m^2.
+
+    Memory is ``n_m * 296`` bytes: 500 candidates seen by 500 poses each take 74 MB.
+    """
+
+    pose_idx: np.ndarray
+    info: np.ndarray
+
+    def __post_init__(self) -> None:
+        idx = np.asarray(self.pose_idx, dtype=np.int64).reshape(-1)
+        info = np.asarray(self.info, dtype=float).reshape(-1, 6, 6)
+        if idx.shape[0] != info.shape[0]:
+            raise ValueError("MarkerCoverage: pose_idx and info lengths differ")
+        if np.unique(idx).shape[0] != idx.shape[0]:
+            raise ValueError("MarkerCoverage: pose_idx must be distinct")
+        object.__setattr__(self, "pose_idx", idx)
+        object.__setattr__(self, "info", info)
+
+    def __len__(self) -> int:
+        return int(self.pose_idx.shape[0])
+
+    @classmethod
+    def from_dense(cls, info: np.ndarray, visible: np.ndarray | None = None) -> "MarkerCoverage":
+        """From per-pose information (N, 6, 6) and an optional (N,) visibility mask.
+
+        Poses that are not visible or whose information is exactly zero are dropped.
+        """
+        info = np.asarray(info, dtype=float)
+        keep = np.any(info != 0.0, axis=(1, 2))
+        if visible is not None:
+            keep &= np.asarray(visible, dtype=bool)
+        idx = np.flatnonzero(keep)
+        return cls(idx, info[idx])
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementResult:
+    """Outcome of :func:`omp_greedy`.
+
+    Attributes:
+        order: picked candidate indices, in placement order.
+        gains: localizability gain ``g(m | S)`` (nats, q-th percentile) of each pick when picked.
+        mean_gains: mean information gain over all N poses of each pick when picked (nats).
+        eligible: whether each pick was eligible by v (False only once eligible ones ran out).
+        q: the percentile used (0-100).
+        evaluations: number of candidate gain evaluations performed.
+        info_after: (N, 6, 6) information of every pose with all picked (and existing) markers.
+    """
+
+    order: list[int]
+    gains: list[float]
+    mean_gains: list[float]
+    eligible: list[bool]
+    q: float
+    evaluations: int
+    info_after: np.ndarray = field(repr=False)
+
+
+def apply_coverages(info: np.ndarray, coverages: Sequence[MarkerCoverage]) -> np.ndarray:
+    """(N, 6, 6) copy of ``info`` with each coverage's information added at the poses that see
+    its marker (``coverages`` in order; the sum is the same in any order up to rounding)."""
+    out = np.array(info, dtype=float, copy=True)
+    for cov in coverages:
+        np.add.at(out, cov.pose_idx, cov.info)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Percentiles
+# --------------------------------------------------------------------------------------------
+
+
+def inverted_cdf_rank(n: int, q: float) -> int:
+    """1-based rank k such that ``np.percentile(x, q, method="inverted_cdf") == sort(x)[k-1]``.
+
+    This is ``inf{i : F(i) >= q/100}`` for n values; computed with numpy itself (on the ranks
+    0..n-1) so floating-point edge cases match numpy exactly.
+    """
+    if n < 1:
+        raise ValueError("need at least one value")
+    return int(np.percentile(np.arange(n), q, method="inverted_cdf")) + 1
+
+
+def percentile_with_zeros(values: np.ndarray, n_total: int, q: float,
+                          rank: int | None = None) -> float:
+    """q-th percentile (inverted_cdf) of ``values`` padded with zeros to ``n_total`` entries.
+
+    Args:
+        values: (n,) nonnegative values (the nonzero part; zeros allowed), n <= n_total.
+        n_total: total number of entries N (the rest are zeros).
+        q: percentile in [0, 100].
+        rank: precomputed :func:`inverted_cdf_rank` (n_total, q).
+
+    Equals ``np.percentile(np.concatenate([values, np.zeros(n_total - n)]), q,
+    method="inverted_cdf")`` without materialising N values.
+    """
+    values = np.asarray(values, dtype=float).reshape(-1)
+    k = inverted_cdf_rank(n_total, q) if rank is None else rank
+    zeros = n_total - values.shape[0]
+    if k <= zeros:
+        return 0.0
+    j = k - zeros - 1
+    return float(np.partition(values, j)[j])
+
+
+def coverage_percentages(coverages: Sequence[MarkerCoverage], num_poses: int) -> np.ndarray:
+    """(C,) ``P_m = 100 |C_m| / N``: percentage of feasible poses that see each candidate."""
+    return np.array([100.0 * len(c) / num_poses for c in coverages], dtype=float)
+
+
+def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
+    """The paper's percentile q from the hyperparameter v (eq. q-v relation).
+
+    ``p* = inf{p in [0, 100] : F_P(p) >= (100 - v)/100}`` (numpy ``inverted_cdf`` for
+    v < 100, and 0 for v = 100), ``q = 100 - p*``.
+
+    Args:
+        coverage_pct: (C,) percentages P_m of poses that see each candidate.
+        v: percent of most visible candidates that should earn nonzero gains, [0, 100].
+
+    Returns:
+        q in [0, 100] and the (C,) bool eligibility mask ``P_m > p*`` (strict; see module
+        docstring).
+    """
+    v = float(v)
+    if not 0.0 <= v <= 100.0:
+        raise UserError(f"v = {v} is outside [0, 100]: give the percent of most visible markers")
+    P = np.asarray(coverage_pct, dtype=float).reshape(-1)
+    if P.size == 0:
+        raise UserError("no candidate markers: nothing to place")
+    p_star = 0.0 if v == 100.0 else float(np.percentile(P, 100.0 - v, method="inverted_cdf"))
+    return 100.0 - p_star, P > p_star
+
+
+# --------------------------------------------------------------------------------------------
+# Greedy
+# --------------------------------------------------------------------------------------------
+
+
+class _Problem:
+    """Flattened coverages for batched gain evaluation."""
+
+    def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float):
+        self.N = base_info.shape[0]
+        self.sizes = np.array([len(c) for c in coverages], dtype=np.int64)
+        self.offsets = np.zeros(len(coverages) + 1, dtype=np.int64)
+        np.cumsum(self.sizes, out=self.offsets[1:])
+        self.coverages = coverages
+        self.rank = inverted_cdf_rank(self.N, q)
+        self.lam = base_info
+        self.linv = whitening(base_info)  # (N, 6, 6) cached L^-1 per pose
+        for c in coverages:
+            if len(c) and (c.pose_idx.min() < 0 or c.pose_idx.max() >= self.N):
+                raise ValueError("MarkerCoverage.pose_idx out of range of base_info")
+
+    def add(self, cov: MarkerCoverage) -> None:
+        """Place a marker: add its information and refresh the whitening where it changed."""
+        self.lam[cov.pose_idx] += cov.info
+        self.linv[cov.pose_idx] = whitening(self.lam[cov.pose_idx])
+
+    def pose_gains(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per-pose information gains (nats) of candidates ``cands``, flattened.
+
+        Returns:
+            nz (len(cands),) bool: the candidate is seen by some pose; pidx (L,) the poses of
+            the seen candidates, one segment each, in order; g (L,) their gains; seg (L,) the
+            segment (index into ``cands[nz]``) of each entry.
+        """
+        cands = np.asarray(cands, dtype=np.int64)
+        sizes = self.sizes[cands]
+        nz = sizes > 0
+        live = cands[nz]
+        if not len(live):
+            return nz, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+        pidx = np.concatenate([self.coverages[m].pose_idx for m in live])
+        info = np.concatenate([self.coverages[m].info for m in live])
+        g = information_gain_whitened(self.linv[pidx], info)
+        return nz, pidx, g, np.repeat(np.arange(len(live)), sizes[nz])
+
+    def evaluate(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """q-th percentile gains and mean gains (nats) of candidates ``cands``."""
+        cands = np.asarray(cands, dtype=np.int64)
+        sizes = self.sizes[cands]
+        qg = np.zeros(len(cands))
+        mg = np.zeros(len(cands))
+        nz, _, g, seg = self.pose_gains(cands)
+        if not np.any(nz):
+            return qg, mg
+        live = cands[nz]
+        mg[nz] = np.bincount(seg, weights=g, minlength=len(live)) / self.N
+        # Per-segment k-th smallest: sort by (segment, gain); segments stay in place.
+        srt = g[np.lexsort((g, seg))]
+        starts = np.zeros(len(live), dtype=np.int64)
+        np.cumsum(sizes[nz][:-1], out=starts[1:])
+        j = self.rank - (self.N - sizes[nz])  # 1-based rank among the segment's values
+        pos = j > 0
+        out = np.zeros(len(live))
+        out[pos] = srt[starts[pos] + j[pos] - 1]
+        qg[nz] = out
+        return qg, mg
+
+
+def check_k(k: int, num_candidates: int) -> int:
+    """``k`` as an int; :class:`UserError` unless 1 <= k <= ``num_candidates`` (integer)."""
+    if int(k) != k or k < 1:
+        raise UserError(f"k = {k}: the number of markers must be a positive integer")
+    if k > num_candidates:
+        raise UserError(f"{k} markers requested but only {num_candidates} candidate marker poses were found: ask for "
+                        "fewer markers or reduce --marker-spacing")
+    return int(k)
+
+
+def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,
+               v: float = 90.0, lazy: bool = True,
+               existing: Sequence[MarkerCoverage] | None = None,
+               progress: Callable[[int, int, int, float], None] | None = None) -> PlacementResult:
+    """Optimized marker placement (the paper's Algorithm 1), optionally with lazy evaluation.
+
+    Args:
+        base_info: (N, 6, 6) information of every feasible pose without candidate markers.
+        coverages: C candidate markers, see :class:`MarkerCoverage`.
+        k: number of markers to place, 1 <= k <= C.
+        v: hyperparameter of the q-from-v rule, [0, 100] (paper default 90).
+        lazy: use the exact lazy (priority queue of stale upper bounds) greedy.
+        existing: coverages of markers already in the scene; their information is added to
+            ``base_info`` before the greedy starts (they are not candidates).
+        progress: optional callback ``progress(i, k, candidate, gain)`` after each pick.
+
+    Returns:
+        :class:`PlacementResult`. Plain and lazy return identical order and gains.
+
+    Raises:
+        UserError: k < 1, k > C, or v outside [0, 100].
+    """
+    C = len(coverages)
+    k = check_k(k, C)
+    lam = np.array(base_info, dtype=float, copy=True)
+    N = lam.shape[0]
+    for ex in existing or ():
+        lam[ex.pose_idx] += ex.info
+    q, eligible = q_from_v(coverage_percentages(coverages, N), v)
+    prob = _Problem(lam, coverages, q)
+    log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",
+              N, C, k, v, q, int(eligible.sum()), lazy)
+
+    order: list[int] = []
+    gains: list[float] = []
+    means: list[float] = []
+    elig: list[bool] = []
+    evaluations = 0
+
+    def keyval(m: int, qg: float, mg: float) -> float:
+        return qg if eligible[m] else mg
+
+    if lazy:
+        all_c = np.arange(C)
+        qg, mg = prob.evaluate(all_c)
+        evaluations += C
+        # Heap entries: (not eligible, -value, index, round evaluated, q gain, mean gain).
+        heap = [(not eligible[m], -keyval(m, qg[m], mg[m]), m, 0, qg[m], mg[m]) for m in range(C)]
+        heapq.heapify(heap)
+        for it in range(k):
+            while True:
+                ne, negval, m, stamp, qgm, mgm = heapq.heappop(heap)
+                if stamp == it:
+                    break
+                qn, mn = prob.evaluate(np.array([m]))
+                evaluations += 1
+                heapq.heappush(heap, (ne, -keyval(m, qn[0], mn[0]), m, it, qn[0], mn[0]))
+            prob.add(coverages[m])
+            order.append(int(m))
+            gains.append(float(qgm))
+            means.append(float(mgm))
+            elig.append(bool(eligible[m]))
+            if progress is not None:
+                progress(it, k, int(m), float(qgm))
+    else:
+        remaining = np.ones(C, dtype=bool)
+        for it in range(k):
+            cands = np.flatnonzero(remaining)
+            qg, mg = prob.evaluate(cands)
+            evaluations += len(cands)
+            el = eligible[cands]
+            val = np.where(el, qg, mg)
+            # Lexicographic max of (eligible, value, -index): cands is sorted ascending, so
+            # argmax (first occurrence) gives the smallest index among ties.
+            pool = el if np.any(el) else np.ones_like(el)
+            val_pool = np.where(pool, val, -np.inf)
+            i = int(np.argmax(val_pool))
+            m = int(cands[i])
+            remaining[m] = False
+            prob.add(coverages[m])
+            order.append(m)
+            gains.append(float(qg[i]))
+            means.append(float(mg[i]))
+            elig.append(bool(eligible[m]))
+            if progress is not None:
+                progress(it, k, m, float(qg[i]))
+    log.info("omp_greedy: placed %d markers (q=%.3f, %d evaluations)", k, q, evaluations)
+    return PlacementResult(order, gains, means, elig, q, evaluations, lam)
+
+
+__all__ = [
+    "MarkerCoverage", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
+    "omp_greedy", "percentile_with_zeros", "q_from_v",
+]

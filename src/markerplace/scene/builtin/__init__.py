@@ -1,0 +1,1 @@
+"""The built-in scenes: procedural interiors generated from room specifications."""
