@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.plan.discretize.stage import artifact as discretization
+from markerplace.plan.discretize import artifact as discretization
 from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
 from markerplace.testbed.marker_sets import NO_MARKERS
 from markerplace.testbed.poses import TestPoses

@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.localization.localizer import get_localizer
     from markerplace.localization.tags import detect_tags
     from markerplace.markers import load_markers
-    from markerplace.plan.planner import PlanConfig, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
     from markerplace.runtime.cache import hash_of
     from markerplace.runtime.executor import RuntimeConfig, make_executor
     from markerplace.runtime.workers import single_threaded_libraries

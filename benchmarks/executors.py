@@ -37,7 +37,8 @@ def _build(spec):
 def main(argv=None) -> None:
     from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
     from markerplace.plan.observe import observe
-    from markerplace.plan.planner import PlanConfig, geometric_visibility
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.score.stage import geometric_visibility
     from markerplace.runtime.executor import RuntimeConfig, WorkerJob, make_executor
     from markerplace.scene.spec import SceneSpec
 
@@ -52,7 +53,7 @@ def main(argv=None) -> None:
     poses = disc.world_from_cam[: args.poses]
     T = disc.candidate_world_from_marker
     config = PlanConfig()
-    in_view = geometric_visibility(poses, T, config)
+    in_view = geometric_visibility(poses, T, config.imaging.camera, config.noise.max_range)
     emit("scene", args.scene)
     emit("poses", len(poses))
     backends = {"inprocess": RuntimeConfig(workers=1), "pool2": RuntimeConfig(workers=2),

@@ -113,7 +113,10 @@ def stage_windows(timings: dict, t0: float, t1: float) -> dict[str, tuple[float,
 def plan_end_to_end(args, run_dir: Path):
     """Plan ``args.scene`` in ``run_dir``; returns (data, placement, sampler, windows, config)."""
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.place.config import PlacementConfig
+    from markerplace.plan.place.stage import place
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
 
@@ -148,7 +151,7 @@ def calibrate(args, data, config, scratch: Path) -> dict:
     wall seconds and CPU seconds (of this process, and of the workers), so that waiting for a
     core on a shared machine can be told apart from work."""
     from markerplace.plan.observe import observe
-    from markerplace.plan.planner import geometric_visibility
+    from markerplace.plan.score.stage import geometric_visibility
     from markerplace.runtime.executor import RuntimeConfig, make_executor
     from markerplace.scene.spec import SceneSpec
 
@@ -162,7 +165,7 @@ def calibrate(args, data, config, scratch: Path) -> dict:
     def run(executor, idx: np.ndarray, name: str, workers=()) -> tuple[float, float, float]:
         """(wall s, main CPU s, workers' CPU s) of the observe function on poses ``idx``."""
         poses = disc.world_from_cam[idx]
-        in_view = geometric_visibility(poses, T, config)
+        in_view = geometric_visibility(poses, T, config.imaging.camera, config.noise.max_range)
         c0, w0, t = _cpu_seconds([me]), _cpu_seconds(workers), time.perf_counter()
         observe(spec, poses, in_view, T, sizes, config.imaging, executor, scratch / name, key=name, progress=False)
         return time.perf_counter() - t, _cpu_seconds([me]) - c0, _cpu_seconds(workers) - w0

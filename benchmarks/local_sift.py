@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.imaging.engine import EngineSpec, ImagingEngine
     from markerplace.localization.features import _sift, to_gray
     from markerplace.markers import load_markers
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.runtime.workers import single_threaded_libraries
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset

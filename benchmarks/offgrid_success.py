@@ -19,7 +19,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from markerplace.plan.discretize.stage import artifact as discretization
+from markerplace.plan.discretize import artifact as discretization
 from markerplace.testbed.calibration import offgrid_poses
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 

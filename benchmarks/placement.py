@@ -210,7 +210,10 @@ def part_c(args) -> None:
     import tempfile
 
     from markerplace.scene.spec import SceneSpec
-    from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.place.config import PlacementConfig
+    from markerplace.plan.place.stage import place
 
     config = PlanConfig(placement=PlacementConfig(k=args.k))
     with tempfile.TemporaryDirectory() as run_dir:

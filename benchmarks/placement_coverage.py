@@ -79,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from evaluation_profile import copy_plan  # the benchmarks' one plan copier (same folder)
 
-    from markerplace.plan.planner import PlanConfig, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
     from markerplace.runtime.executor import RuntimeConfig, make_executor
     from markerplace.scene.spec import SceneSpec
 

@@ -132,7 +132,10 @@ def part_b(args) -> None:
     import tempfile
 
     from markerplace.scene.spec import SceneSpec
-    from markerplace.plan.planner import PlacementConfig, PlanConfig, place, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.place.config import PlacementConfig
+    from markerplace.plan.place.stage import place
     from markerplace.scene import load_scene
 
     path, t_scan = scan_of(args.big_scene, args.big_voxel, Path(args.cache))

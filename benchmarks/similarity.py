@@ -56,8 +56,8 @@ if ARGS is not None and ARGS.threads:  # before numpy loads its BLAS
 
 import numpy as np  # noqa: E402
 
-from markerplace.plan.similarity.stage import (SimilarityConfig, count_similar, count_similar_exact,  # noqa: E402
-                                         count_similar_ivf)
+from markerplace.plan.similarity.config import SimilarityConfig
+from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 from markerplace.plan.similarity.quality import measure_error, synthetic_descriptors  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

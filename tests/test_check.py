@@ -43,7 +43,7 @@ def test_installed_coverages_are_the_plans_own(plan):
     from markerplace.markers import Marker
     from markerplace.plan.check import installed_coverages
     from markerplace.plan.folder import read_plan_folder
-    from markerplace.plan.planner import prepare
+    from markerplace.pipelines.plan import prepare
     from markerplace.runtime.executor import RuntimeConfig, make_executor
 
     folder = read_plan_folder(plan)

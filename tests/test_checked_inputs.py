@@ -194,7 +194,7 @@ def test_deep_json_is_one_line_not_a_recursion_error(option, tmp_path, capsys):
     deep = tmp_path / "deep.json"
     deep.write_text("[" * 100_000)
     if option == "--installed":  # check reads the installed tags with the same reader
-        from markerplace.report.check_report import load_installed
+        from markerplace.pipelines.check import load_installed
 
         with pytest.raises(UserError, match="100000 deep"):
             load_installed(deep, 0.4)

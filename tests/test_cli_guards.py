@@ -127,9 +127,9 @@ def test_read_only_folder_is_one_line_error(command, tmp_path):
     ("--start", "1,2,3", "X,Y"),
 ])
 def test_plan_numbers_are_checked_before_any_work(option, value, needle, tmp_path, capsys, monkeypatch):
-    import markerplace.plan.planner
+    import markerplace.pipelines.plan
 
-    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.pipelines.plan, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     t0 = time.perf_counter()
     assert main(["plan", "tiny", "--out", str(tmp_path / "o"), *FAST, option, value]) == 2
     assert time.perf_counter() - t0 < 5
@@ -214,9 +214,9 @@ def test_bound_messages_name_option_value_range_and_unit():
 # --- item 3: the size guard --------------------------------------------------------------------------
 
 def test_size_guard_refuses_a_run_that_would_not_fit(tmp_path, capsys, monkeypatch):
-    import markerplace.plan.planner
+    import markerplace.pipelines.plan
 
-    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.pipelines.plan, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     t0 = time.perf_counter()
     assert main(["plan", "office", "--grid-spacing", "0.05", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert time.perf_counter() - t0 < 20
@@ -254,7 +254,7 @@ def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
     from dataclasses import replace
 
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.scene import load_scene
 
     out = tmp_path / "p"
@@ -290,7 +290,7 @@ def test_size_guard_counts_storeys_of_level_all():
     from dataclasses import replace
 
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.scene import load_scene
 
     house = load_scene("house")  # two storeys
@@ -308,7 +308,7 @@ def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatc
 
     from markerplace.pipelines import size_guard
     from markerplace.plan.discretize.stage import discretize
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.scene import load_scene
     from markerplace.scene.spec import SceneSpec
 

@@ -90,7 +90,9 @@ def tiny_run(tmp_path_factory):
 
 
 def test_replan_with_exclude_renders_nothing_and_drops_the_spot(tiny_run, tmp_path, monkeypatch, capsys):
-    import markerplace.plan.planner as planner
+    import markerplace.plan.discretize.stage as discretize_stage
+    import markerplace.plan.observe as observe_stage
+    import markerplace.plan.similarity.stage as similarity_stage
 
     capsys.readouterr()
     first = json.loads((tiny_run / "placement.json").read_text())["markers"]
@@ -101,9 +103,9 @@ def test_replan_with_exclude_renders_nothing_and_drops_the_spot(tiny_run, tmp_pa
     def no_stage(*args, **kwargs):
         raise AssertionError("a cached stage ran again")
 
-    monkeypatch.setattr(planner, "observe", no_stage)  # rendering + SIFT
-    monkeypatch.setattr(planner, "discretize", no_stage)
-    monkeypatch.setattr(planner, "count_similar", no_stage)
+    monkeypatch.setattr(observe_stage, "observe", no_stage)  # rendering + SIFT
+    monkeypatch.setattr(discretize_stage, "discretize", no_stage)
+    monkeypatch.setattr(similarity_stage, "count_similar", no_stage)
     assert main(["plan", "tiny", "-k", "3", "--out", str(tiny_run), "--exclude", str(path), *FAST]) == 0
     out = capsys.readouterr().out
     assert "changes against the previous placement.json" in out
@@ -127,7 +129,7 @@ def test_exclusion_masks_candidates_and_the_calibrations_coverages(tiny_run):
     method's coverages aligned (existing markers stay at the end)."""
     from markerplace.plan.discretize.exclusion import exclude_candidates
     from markerplace.plan.folder import read_plan_folder
-    from markerplace.plan.planner import prepare
+    from markerplace.pipelines.plan import prepare
 
     folder = read_plan_folder(tiny_run)
     data = prepare(folder.spec, folder.config, tiny_run, progress=False)  # every stage cached

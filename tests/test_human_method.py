@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from markerplace.cli.main import build_parser, main, plan_config_from_args
-from markerplace.plan import planner
+from markerplace.pipelines.plan import prepare
 from markerplace.plan.place.human import HumanConfig, WallAnalysis, analyse, human_placement, largest_remainder, select
 from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.scene.export import export_glb
@@ -77,7 +77,7 @@ def planned(tmp_path_factory):
     out = d / "plan"
     assert main(["plan", str(glb), "-k", "4", "--method", "human", "--out", str(out), *FAST]) == 0
     config = plan_config_from_args(build_parser().parse_args(["plan", str(glb), "--out", str(out), *FAST]))
-    data = planner.prepare(SceneSpec(str(glb)), config, out, progress=False)  # cached stages
+    data = prepare(SceneSpec(str(glb)), config, out, progress=False)  # cached stages
     return out, data, analyse(data, HumanConfig())
 
 

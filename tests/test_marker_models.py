@@ -156,7 +156,8 @@ def test_registering_rejects_bad_classes():
 def test_a_model_registered_in_a_test_reaches_the_cli_and_the_planner(toy_model, capsys):
     """Registering is all it takes: the CLI accepts it, validation passes, the coverages use it."""
     from markerplace.cli.main import build_parser, plan_config_from_args
-    from markerplace.plan.planner import build_coverages, validate
+    from markerplace.plan.config import validate
+    from markerplace.plan.score.stage import build_coverages
 
     args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--marker-model", "toy"])
     config = plan_config_from_args(args)
@@ -167,6 +168,7 @@ def test_a_model_registered_in_a_test_reaches_the_cli_and_the_planner(toy_model,
     assert "toy (constant information)" in " ".join(capsys.readouterr().out.split())
     T = np.stack([world_from_cam_pose(np.array([0.0, 0.0, 1.5]), 0.0)] * 3)
     Tm = _facing_marker(T[0], 2.0)[None]
-    covs = build_coverages(T, Tm, [0.4], np.array([[True], [False], [True]]), config)
+    covs = build_coverages(T, Tm, [0.4], np.array([[True], [False], [True]]), config.placement.marker_model, config.noise,
+                           config.imaging.camera.K)
     assert covs[0].pose_idx.tolist() == [0, 2]
     np.testing.assert_array_equal(covs[0].info, np.broadcast_to(7.0 * np.eye(6), (2, 6, 6)))

@@ -230,9 +230,9 @@ def test_up_axis_is_told_by_the_floors_not_by_a_pit_below_them():
      "tag 9 at (0.05, 0.90, 1.50) has normal (0.60, 0.00, 0.80), not horizontal"),
 ])
 def test_existing_marker_off_the_walls_stops_the_run(marker, message, tmp_path, capsys, monkeypatch):
-    import markerplace.plan.planner
+    import markerplace.pipelines.plan
 
-    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.pipelines.plan, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     path = tmp_path / "existing.json"
     path.write_text(json.dumps({"markers": [marker]}))
     assert main(["plan", "tiny", "-k", "1", "--existing", str(path), "--out", str(tmp_path / "o"), *FAST]) == 2
@@ -328,11 +328,11 @@ def test_obj_missing_texture_is_named(meshes, tmp_path, caplog):
 
 @pytest.mark.parametrize("make", ["missing", "empty", "malformed"])
 def test_evaluate_checks_placements_before_any_work(make, tmp_path, capsys, monkeypatch):
-    import markerplace.plan.planner
-    import markerplace.testbed.experiment
+    import markerplace.pipelines.plan
+    import markerplace.pipelines.evaluate
 
-    monkeypatch.setattr(markerplace.plan.planner, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
-    monkeypatch.setattr(markerplace.testbed.experiment, "run_evaluation", lambda *a, **k: pytest.fail("evaluation ran"))
+    monkeypatch.setattr(markerplace.pipelines.plan, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
+    monkeypatch.setattr(markerplace.pipelines.evaluate, "run_evaluation", lambda *a, **k: pytest.fail("evaluation ran"))
     folder = tmp_path / "placements"
     if make != "missing":
         folder.mkdir()

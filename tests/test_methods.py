@@ -1,4 +1,4 @@
-"""Placement methods chosen by name: registry, dispatch through planner.place, evaluation and
+"""Placement methods chosen by name: registry, dispatch through place, evaluation and
 report tables reading the registry, and a method added in a test (no scene: synthetic PlanData)."""
 
 from __future__ import annotations
@@ -12,7 +12,10 @@ import pytest
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
-from markerplace.plan import planner
+from markerplace.plan.config import PlanConfig, validate
+from markerplace.plan.place.config import PlacementConfig
+from markerplace.plan.place.stage import place
+from markerplace.plan.types import PlanData
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.place.methods import (
     OMP,
@@ -28,7 +31,7 @@ from markerplace.testbed import marker_sets as placements
 from markerplace.testbed import config as tbconfig
 
 
-def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> planner.PlanData:
+def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> PlanData:
     """A random placement problem: SPD base information, random sparse PSD coverages."""
     rng = np.random.default_rng(seed)
     A = rng.normal(size=(N, 6, 6))
@@ -43,7 +46,7 @@ def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> plann
         candidate_world_from_marker=np.stack([world_from_marker_pose(np.array([i, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]))
                                               for i in range(C)]),
         perimeter_arclength=np.sort(rng.uniform(0, L, C)), perimeter_length=L)
-    return planner.PlanData(disc, base, -entropy(base), covs, C, {})
+    return PlanData(disc, base, -entropy(base), covs, C, {})
 
 
 def test_registry_lists_the_five_methods_in_order():
@@ -59,15 +62,15 @@ def test_unknown_method_is_a_one_line_user_error():
         get_placement_method("greedy")
     assert str(err.value) == "--method 'greedy' is not known: use one of omp, random, uniform, human, expected-recall"
     with pytest.raises(UserError, match="--method 'greedy' is not known"):
-        planner.validate(planner.PlanConfig(placement=planner.PlacementConfig(method="greedy")))
+        validate(PlanConfig(placement=PlacementConfig(method="greedy")))
     with pytest.raises(UserError, match="--marker-model 'x' is not known: use one of paper, corners"):
-        planner.validate(planner.PlanConfig(placement=planner.PlacementConfig(marker_model="x")))
+        validate(PlanConfig(placement=PlacementConfig(marker_model="x")))
 
 
 def test_method_settings_come_from_placement_config():
-    m = method_from_config(planner.PlacementConfig(v=55.0, lazy=False))
+    m = method_from_config(PlacementConfig(v=55.0, lazy=False))
     assert isinstance(m, OMP) and m.conf == OMP.Config(v=55.0, lazy=False)
-    assert planner.PlacementConfig().v == OMP.default_conf.v and planner.PlacementConfig().lazy == OMP.default_conf.lazy
+    assert PlacementConfig().v == OMP.default_conf.v and PlacementConfig().lazy == OMP.default_conf.lazy
     assert get_placement_method("omp", v=10.0).conf.v == 10.0
     with pytest.raises(TypeError):
         get_placement_method("random", v=10.0)
@@ -77,7 +80,7 @@ def test_method_settings_come_from_placement_config():
 def test_omp_through_the_registry_is_omp_greedy(v, lazy):
     data = _data(1)
     C = data.num_candidates
-    pl = planner.place(data, planner.PlacementConfig(k=5, method="omp", v=v, lazy=lazy), progress=False)
+    pl = place(data, PlacementConfig(k=5, method="omp", v=v, lazy=lazy), progress=False)
     ref = omp_greedy(data.base_info, data.coverages[:C], 5, v=v, lazy=lazy, existing=data.coverages[C:])
     assert pl.candidates.tolist() == ref.order and pl.candidates.dtype == np.int64
     np.testing.assert_array_equal(pl.gains, ref.gains)
@@ -90,7 +93,7 @@ def test_omp_through_the_registry_is_omp_greedy(v, lazy):
 def test_baselines_through_the_registry_keep_their_seeded_choice(method, seed):
     data = _data(2)
     C = data.num_candidates
-    pl = planner.place(data, planner.PlacementConfig(k=4, method=method, seed=seed), progress=False)
+    pl = place(data, PlacementConfig(k=4, method=method, seed=seed), progress=False)
     if method == "random":
         ref = random_placement(C, 4, seed)
     else:
@@ -99,14 +102,14 @@ def test_baselines_through_the_registry_keep_their_seeded_choice(method, seed):
     assert np.isnan(pl.gains).all() and np.isnan(pl.q)
     expected = apply_coverages(data.base_info, list(data.coverages[C:]) + [data.coverages[i] for i in ref])
     np.testing.assert_array_equal(pl.info_after, expected)
-    other = planner.place(data, planner.PlacementConfig(k=4, method=method, seed=seed + 1), progress=False)
+    other = place(data, PlacementConfig(k=4, method=method, seed=seed + 1), progress=False)
     assert other.candidates.tolist() != ref  # the seed is passed on
 
 
 def test_tag_ids_skip_existing_and_sizes_come_from_the_config():
     data = _data(3)
     existing = [Marker(1, 0.3, np.eye(4))]
-    pl = planner.place(data, planner.PlacementConfig(k=3, method="random", tag_size=0.25), existing=existing)
+    pl = place(data, PlacementConfig(k=3, method="random", tag_size=0.25), existing=existing)
     assert [m.tag_id for m in pl.markers] == [0, 2, 3]
     assert all(m.size == 0.25 for m in pl.markers)
 
@@ -159,8 +162,8 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
     data = _data(4)
     args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--method", "toy", "-v", "7", "-k", "3"])
     config = plan_config_from_args(args)
-    planner.validate(config)
-    pl = planner.place(data, config.placement, progress=False)
+    validate(config)
+    pl = place(data, config.placement, progress=False)
     assert pl.candidates.tolist() == [13, 12, 11] and pl.gains.tolist() == [7.0] * 3  # v from PlacementConfig
     with pytest.raises(SystemExit):
         build_parser().parse_args(["plan", "--help"])
@@ -197,15 +200,15 @@ def test_build_placements_order_and_seeds_are_unchanged():
     """none, omp once at max k (prefixes), then random and uniform per (run, k) with seed + run
     (human needs a scene's SIFT points, which the synthetic data has not: tests/test_human_method.py)."""
     data = _data(5)
-    pc = planner.PlacementConfig(seed=4)
+    pc = PlacementConfig(seed=4)
     study = tbconfig.StudyConfig(methods=("none", "omp", "random", "uniform"), ks=(2, 4), runs=2)
     runs = placements.build_placements(data, pc, tbconfig.EvaluateConfig(study=study))
     assert [(r.method, r.run, r.k) for r in runs] == [("none", 0, 0), ("omp", 0, 2), ("omp", 0, 4)] + [
         (m, run, k) for m in ("random", "uniform") for run in range(2) for k in (2, 4)]
-    omp = planner.place(data, replace(pc, k=4, method="omp"), progress=False)
+    omp = place(data, replace(pc, k=4, method="omp"), progress=False)
     for r in runs[1:3]:
         np.testing.assert_array_equal([m.world_from_marker for m in r.markers],
                                       [m.world_from_marker for m in omp.markers[:r.k]])
     for r in runs[3:]:
-        ref = planner.place(data, replace(pc, k=r.k, method=r.method, seed=4 + r.run), progress=False)
+        ref = place(data, replace(pc, k=r.k, method=r.method, seed=4 + r.run), progress=False)
         np.testing.assert_array_equal([m.world_from_marker for m in r.markers], [m.world_from_marker for m in ref.markers])

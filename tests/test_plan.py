@@ -105,7 +105,8 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.plan.planner import PlanConfig, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
 
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
                         runtime=RuntimeConfig(workers=1))

@@ -3,7 +3,8 @@
 from dataclasses import replace
 
 from markerplace.plan.discretize.stage import DiscretizeConfig
-from markerplace.plan.planner import PlacementConfig, PlanConfig
+from markerplace.plan.config import PlanConfig
+from markerplace.plan.place.config import PlacementConfig
 
 
 def test_discretize_tag_size_is_derived_from_placement():

@@ -50,10 +50,10 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     markers from the store (none is made) and gives bit-identical per-image errors; a run that
     adds placements renders only views no earlier run rendered."""
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.testbed.experiment import run_evaluation
+    from markerplace.pipelines.evaluate import run_evaluation
     from markerplace.testbed.images import TestbedImaging
 
     rendered = []

@@ -262,7 +262,8 @@ def test_live_lock_is_named_and_stale_lock_taken_over(tmp_path, caplog):
 
 def test_similarity_is_recomputed_when_the_observations_change(copy_of):
     from markerplace.imaging.features import FeatureSet
-    from markerplace.plan.similarity.stage import SimilarityConfig, count_similar
+    from markerplace.plan.similarity.config import SimilarityConfig
+    from markerplace.plan.similarity.stage import count_similar
     from markerplace.runtime import cache
 
     run = copy_of()

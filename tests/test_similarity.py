@@ -9,7 +9,8 @@ import faiss
 import numpy as np
 import pytest
 
-from markerplace.plan.similarity.stage import SimilarityConfig, count_similar, count_similar_exact, count_similar_ivf
+from markerplace.plan.similarity.config import SimilarityConfig
+from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 from markerplace.plan.similarity.quality import measure_error, synthetic_descriptors
 
 log = logging.getLogger(__name__)

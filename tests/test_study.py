@@ -37,7 +37,7 @@ def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_pat
     max(ks) markers (the README's `markerplace study office --out out/study` once failed here)."""
     from markerplace.cli.main import build_parser
     from markerplace.cli.options import plan_config_for_budgets
-    from markerplace.plan.planner import validate
+    from markerplace.plan.config import validate
     from markerplace.validation import EVAL_K, parse_int_list
 
     for command in ("study", "evaluate"):
@@ -67,7 +67,7 @@ def test_study_runs_leave_the_diagnostics_out_and_are_checked_first():
 
     from markerplace.errors import UserError
     from markerplace.testbed.config import DiagnosticsConfig, EvaluateConfig
-    from markerplace.testbed.study import StudyPlan, study_runs
+    from markerplace.pipelines.study import StudyPlan, study_runs
 
     config = EvaluateConfig(diagnostics=DiagnosticsConfig(ceiling=True, calibration=True))
     runs = study_runs(config, StudyPlan(shifts=(0.25,), scales=(0.5,)))

@@ -277,10 +277,10 @@ def test_reusing_unchanged_queries_changes_no_result(tmp_path):
 
     from markerplace.geometry import world_from_marker_pose
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.testbed.experiment import run_evaluation
+    from markerplace.pipelines.evaluate import run_evaluation
 
     outside = Marker(30, 0.4, world_from_marker_pose(np.array([-0.15, 1.7, 1.5]), np.array([-1.0, 0.0, 0.0])))
     (tmp_path / "extra" / "outside").mkdir(parents=True)

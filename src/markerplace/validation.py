@@ -149,7 +149,7 @@ def check_args(args) -> None:
     default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
     ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
     with it). Whether a scheduler answers is checked once the output paths are
-    (:func:`markerplace.cli.options.check_cluster_answers`)."""
+    (:func:`markerplace.runtime.cluster.check_scheduler`)."""
     for dest, bound in BOUNDS.get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -224,7 +224,7 @@ def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
 
 
 def check_plan_config(config) -> None:
-    """Numeric settings of a :class:`~markerplace.plan.planner.PlanConfig` (the same bounds as the
+    """Numeric settings of a :class:`~markerplace.plan.config.PlanConfig` (the same bounds as the
     command line)."""
     d, p = config.discretize, config.placement
     K.check(p.k)

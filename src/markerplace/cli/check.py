@@ -1,14 +1,14 @@
 """``markerplace check PLAN_DIR --installed installed.json``: where the tags really went vs the
-plan (:mod:`markerplace.report.check_report`). Registered by :func:`markerplace.cli.main.build_parser`."""
+plan (:func:`markerplace.pipelines.check.run_check`). Registered by :func:`markerplace.cli.main.build_parser`."""
 
 from __future__ import annotations
 
 import argparse
 
+from markerplace.pipelines.check import run_check
+
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from markerplace.report.check_report import run_check
-
     _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, workers=args.workers,
                         progress=not args.quiet, adopt=args.adopt)
     print(text)

@@ -1,4 +1,4 @@
-"""The ``evaluate`` subcommand: parses arguments and runs :func:`markerplace.testbed.experiment.run_evaluation`.
+"""The ``evaluate`` subcommand: parses arguments and runs :func:`markerplace.pipelines.evaluate.run_evaluation`.
 
 Wire it into the main parser with ``add_evaluate_parser(subparsers)``.
 """
@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
 
-from markerplace.errors import UserError
+from markerplace.cli.options import plan_config_for_budgets
+from markerplace.pipelines.evaluate import RunInputs, evaluate
+from markerplace.scene.spec import SceneSpec
+from markerplace.testbed.config import validate_evaluate_config
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -40,32 +42,13 @@ def evaluate_config_from_args(args: argparse.Namespace):
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    """Handler of ``markerplace evaluate``: prints the recall table at (5 cm, 5 deg)."""
-    from markerplace.cli.options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
-    from markerplace.testbed.config import validate_evaluate_config
-    from markerplace.testbed.marker_sets import find_placement_files, method_names
-    from markerplace.markers import load_markers
-    from markerplace.scene.spec import SceneSpec
-    from markerplace.plan.planner import validate
-    from markerplace.testbed.experiment import run_evaluation
-    from markerplace.runtime.run_folder import open_run_folder
-
+    """Handler of ``markerplace evaluate``: :func:`markerplace.pipelines.evaluate.evaluate`, then
+    the recall table at (5 cm, 5 deg) and what it wrote."""
     config = evaluate_config_from_args(args)
-    validate_evaluate_config(config)
-    if not config.study.methods and not args.placements:
-        raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
-    plan_config = plan_config_for_budgets(args, config.study.ks)
-    validate(plan_config)
-    # every input file is read before any work: a bad --placements fails in a second, not after the plan
-    placement_files = find_placement_files(args.placements) if args.placements else {}
-    for path in placement_files.values():
-        load_markers(path, "--placements")
-    open_run_folder(args.out, "evaluate", adopt=args.adopt)
-    check_cluster_answers(args)
-    spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
-    run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, len(placement_files))
-    result = run_evaluation(spec, run_config, config, args.out, placements_dir=args.placements,
-                            progress=not getattr(args, "quiet", False))
+    validate_evaluate_config(config)  # its budgets are valid before the plan settings use them
+    inputs = RunInputs(force=args.force, adopt=args.adopt, progress=not getattr(args, "quiet", False))
+    scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
+    result = evaluate(scene, plan_config_for_budgets(args, config.study.ks), config, args.out, args.placements, inputs)
     print(result.summary)
     extra = "".join(f", {f}" for f, on in (("ceiling.md", args.ceiling), ("calibration.md, calibration.png, map_outcomes.npz",
                                                                           args.calibration)) if on)

@@ -16,8 +16,9 @@ from pathlib import Path
 from markerplace import __version__
 from markerplace.errors import UserError
 from markerplace.log import setup_logging
-from markerplace.cli.options import (add_plan_args, add_scene_args, check_cluster_answers, plan_config_from_args,
-                      plan_inputs_in_scene_frame)
+from markerplace.pipelines.plan import PlanInputs, run_plan
+from markerplace.scene.spec import SceneSpec
+from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_from_args
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -88,69 +89,16 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from markerplace.markers import check_markers_on_walls, check_tag_budget, load_markers
-    from markerplace.scene.spec import SceneSpec
-    from markerplace.plan.place.greedy import check_k
-    from markerplace.plan.planner import first_pick_gain, place, prepare, validate
-    from markerplace.report.plan_outputs import write_plan_outputs
-    from markerplace.runtime.run_folder import open_run_folder
-    from markerplace.scene.worldframe import markers_to_internal, world_offset
-
-    config = plan_config_from_args(args)
-    validate(config)
-    from markerplace.plan.place.methods import PLACEMENT_METHODS
-
-    if config.placement.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(config.placement.method).calibrated:
-        log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
-                    "model)", config.placement.calibration_poses, config.placement.method)
-    existing = load_markers(args.existing, "--existing") if args.existing else []
-    check_tag_budget(config.placement.k, existing, config.placement.first_tag_id)
-    from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion, previous_markers
-
-    exclusion = load_exclusion(args.exclude) if args.exclude else None
-    previous = previous_markers(args.out, args.scene)  # to say what this run changes
-    open_run_folder(args.out, "plan", adopt=args.adopt)  # marked, locked; released by main()
-    check_cluster_answers(args)
-    spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
-    scene = spec.load()
-    offset = world_offset(scene)  # user inputs and outputs are in the file's frame
-    existing = markers_to_internal(existing, offset)
-    check_markers_on_walls(scene, existing, f"--existing {args.existing}")
-    run_config = plan_inputs_in_scene_frame(config, scene, args.force)
-    progress = not args.quiet
-    from markerplace.runtime.executor import make_executor
-    from markerplace.pipelines.size_guard import measured_size_check
-    from markerplace.testbed.calibration import calibrate_plan
-
-    with make_executor(run_config.runtime) as executor:
-        size_check = measured_size_check(scene, spec, run_config, config.placement.k, force=args.force)
-        data = prepare(spec, run_config, args.out, existing=existing, progress=progress, executor=executor,
-                       k=config.placement.k, before_observe=size_check)
-        check_k(config.placement.k, data.num_candidates)  # before calibrating for nothing
-        calibrate_plan(spec, data, run_config, args.out, executor, progress=progress)  # expected-recall only
-    if exclusion is not None:
-        data = apply_exclusion(data, exclusion, offset, config.placement.k)
-    placement = place(data, config.placement, existing=existing, progress=progress)
-    summary = write_plan_outputs(args.out, data=data, placement=placement,
-                                 first_gain=first_pick_gain(data, placement), config=config,
-                                 method=config.placement.method, scene_source=args.scene, scene=scene, existing=existing,
-                                 world_offset=offset, paper=args.paper,
-                                 scene_options={"up": args.up, "unit_scale": args.unit_scale, "seed": args.seed},
-                                 exclusion=exclusion)
-    log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
-             len(placement.markers), config.placement.method, summary["mean_score_before"],
-             summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])
-    log.info("stage seconds: %s", ", ".join(f"{k} {v:.1f}" for k, v in data.timings.items()))
-    from markerplace.report.plan_report import write_plan_report
-
-    report = write_plan_report(args.out, scene, data.disc, config.discretize.height, world_offset=offset)
-    print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, gain_first.png, placement.png, config.json")
-    print(f"wrote {report}")
-    if previous is not None:
-        from markerplace.plan.discretize.exclusion import describe_changes, placement_changes
-
-        for line in describe_changes(placement_changes(previous, previous_markers(args.out, args.scene) or [])):
-            print(line)
+    """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan`, then what it wrote."""
+    inputs = PlanInputs(existing=args.existing, exclude=args.exclude, paper=args.paper, force=args.force,
+                        adopt=args.adopt, progress=not args.quiet)
+    scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
+    result = run_plan(plan_config_from_args(args), scene, args.out, inputs)
+    print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, "
+          "gain_first.png, placement.png, config.json")
+    print(f"wrote {result.report}")
+    for line in result.changes:
+        print(line)
     return 0
 
 

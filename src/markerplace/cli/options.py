@@ -1,8 +1,8 @@
 """Options and settings shared by ``plan`` and ``evaluate``: the scene arguments, the
 discretization, scoring, placement and runtime options, and the
-:class:`~markerplace.plan.planner.PlanConfig` built from them.
+:class:`~markerplace.plan.config.PlanConfig` built from them.
 
-``--start`` X,Y is given in the user's (file) frame, metres; :func:`plan_inputs_in_scene_frame`
+``--start`` X,Y is given in the user's (file) frame, metres; :func:`markerplace.pipelines.size_guard.check_first_guess`
 moves it into the scene's internal frame after the run-size guard. Lengths are metres.
 Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` and
 :mod:`markerplace.cli.study`.
@@ -17,7 +17,7 @@ from typing import Sequence
 log = logging.getLogger(__name__)
 
 __all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy",
-           "plan_config_from_args", "plan_config_for_budgets", "plan_inputs_in_scene_frame", "check_cluster_answers"]
+           "plan_config_from_args", "plan_config_for_budgets"]
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
@@ -33,40 +33,6 @@ def parse_xy(text: str | None):
     from markerplace.validation import COORDINATE, parse_floats
 
     return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
-
-
-def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
-    """``config`` with ``--start`` moved into the scene's internal frame
-    (:mod:`markerplace.scene.worldframe`), after the run-size guard
-    (:func:`markerplace.pipelines.size_guard.check_run_size`; ``force`` = ``--force``)."""
-    from dataclasses import replace
-
-    from markerplace.pipelines.size_guard import RECOUNT_FACTOR, check_run_size, estimate_run, over_limits
-    from markerplace.scene.worldframe import points_to_internal, world_offset
-
-    offset = world_offset(scene)
-    if config.discretize.start is not None and offset.any():
-        start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
-        config = replace(config, discretize=replace(config.discretize, start=start))
-    estimate = estimate_run(scene, config, evaluate_config, extra_placements)
-    if over_limits(estimate) and not over_limits(estimate, factor=RECOUNT_FACTOR) and not force:
-        # the bound is loose (multi-level models): count the poses (seconds)
-        from markerplace.plan.discretize.stage import discretize
-
-        log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
-        poses = len(discretize(scene, config.discretize).world_from_cam)
-        estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
-    check_run_size(estimate, force=force, what="run size, a first guess before discretizing")
-    return config
-
-
-def check_cluster_answers(args: argparse.Namespace) -> None:
-    """``--cluster tcp://...``: a Dask scheduler must answer there (connect and handshake within
-    seconds, :func:`markerplace.runtime.cluster.check_scheduler`) before the scene is loaded."""
-    if getattr(args, "cluster", None):
-        from markerplace.runtime.cluster import check_scheduler
-
-        check_scheduler(args.cluster)
 
 
 def parse_level(text: str):
@@ -101,11 +67,12 @@ def parse_allow(text: str | None) -> tuple[str, ...]:
 
 
 def plan_config_from_args(args: argparse.Namespace):
-    """Build a :class:`~markerplace.plan.planner.PlanConfig` from ``plan``/``evaluate`` arguments."""
+    """Build a :class:`~markerplace.plan.config.PlanConfig` from ``plan``/``evaluate`` arguments."""
     from dataclasses import replace
 
     from markerplace.plan.discretize.stage import DiscretizeConfig
-    from markerplace.plan.planner import PlacementConfig, PlanConfig
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.place.config import PlacementConfig
     from markerplace.runtime.executor import RuntimeConfig
 
     disc = replace(DiscretizeConfig(), height=args.height, level=args.level, start=parse_xy(args.start),
@@ -123,7 +90,7 @@ def plan_config_from_args(args: argparse.Namespace):
 
 
 def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
-    """The :class:`~markerplace.plan.planner.PlanConfig` of ``evaluate``/``study`` arguments.
+    """The :class:`~markerplace.plan.config.PlanConfig` of ``evaluate``/``study`` arguments.
 
     Their ``--k`` is a comma list of budgets held in the same ``args.k`` that ``plan`` uses for
     its one budget, so it is read here as ``ks`` (the parsed budgets, each >= 1): the plan places
@@ -139,7 +106,8 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
 def add_plan_args(p: argparse.ArgumentParser) -> None:
     """Options shared by `plan` and `evaluate` (discretization, scoring)."""
     from markerplace.plan.score.marker_models import MARKER_MODELS
-    from markerplace.plan.place.methods import CALIBRATION_POSES, PLACEMENT_METHODS
+    from markerplace.plan.place.config import CALIBRATION_POSES
+    from markerplace.plan.place.methods import PLACEMENT_METHODS
 
     g = p.add_argument_group("discretization")
     g.add_argument("--height", type=float, default=1.5, help="eye level (cameras and tag centres) above the local floor, metres (default 1.5)")

@@ -1,5 +1,5 @@
 """The ``study`` subcommand: the paper's parameter study (Table II) and sensitivity study of one
-scene (:func:`markerplace.testbed.study.run_study`)."""
+scene (:func:`markerplace.pipelines.study.run_study`)."""
 
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ __all__ = ["add_study_parser"]
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``markerplace study``: prints the study's tables."""
-    from markerplace.runtime.run_folder import open_run_folder
-    from markerplace.plan.planner import validate
+    from markerplace.pipelines.evaluate import RunInputs, open_evaluation_folder
+    from markerplace.plan.config import validate
     from markerplace.scene.spec import SceneSpec
     from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
-    from markerplace.testbed.study import StudyPlan, run_study
+    from markerplace.pipelines.study import StudyPlan, run_study
     from markerplace.validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
-    from markerplace.cli.options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
+    from markerplace.cli.options import plan_config_for_budgets
 
     ks = parse_int_list(args.k, "--k", EVAL_K)
     config = EvaluateConfig(test=TestSetConfig(tests=args.tests, seed=args.test_seed),
@@ -30,12 +30,11 @@ def cmd_study(args: argparse.Namespace) -> int:
                      detection_off=not args.no_detection_study, similarity_off=not args.no_similarity_study)
     plan_config = plan_config_for_budgets(args, ks)
     validate(plan_config)
-    open_run_folder(args.out, "study", adopt=args.adopt)
-    check_cluster_answers(args)
     spec = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     runs = 1 + len(plan.shifts) + len(plan.scales) + int(plan.detection_off)
-    run_config = plan_inputs_in_scene_frame(plan_config, spec.load(), args.force, config, runs * len(ks))
-    text = run_study(spec, run_config, config, args.out, plan, progress=not getattr(args, "quiet", False))
+    inputs = RunInputs(force=args.force, adopt=args.adopt, progress=not getattr(args, "quiet", False))
+    run_config = open_evaluation_folder("study", args.out, spec, plan_config, config, inputs, runs * len(ks))
+    text = run_study(spec, run_config, config, args.out, plan, progress=inputs.progress)
     print(text)
     print(f"wrote {args.out}/study.md, study.csv, study_*.png and runs/*/ (one evaluation each)")
     return 0

@@ -25,10 +25,12 @@ from __future__ import annotations
 import logging
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from markerplace.errors import UserError
+from markerplace.plan.discretize.stage import discretize
+from markerplace.scene.worldframe import points_to_internal, world_offset
 from markerplace.progress import format_duration
 from markerplace.validation import OCCUPANCY_CELL
 
@@ -355,3 +357,21 @@ def check_run_size(estimate: RunEstimate, force: bool = False, limits: SizeLimit
              if estimate.footprint_m2 > LARGE_FOOTPRINT_M2 else "")
     raise UserError(f"this run needs {estimate.describe()}: {' and '.join(reasons)}; increase --grid-spacing or "
                     f"reduce --yaws (or --tests/--runs/--k), or pass --force to run it anyway{units}")
+
+
+def check_first_guess(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
+    """The run-size guard's first guess, before discretizing (:func:`check_run_size`; ``force``
+    = ``--force``); returns ``config`` with ``--start`` moved into the scene's internal frame
+    (:mod:`markerplace.scene.worldframe`)."""
+    offset = world_offset(scene)
+    if config.discretize.start is not None and offset.any():
+        start = tuple(float(v) for v in points_to_internal(config.discretize.start, offset))
+        config = replace(config, discretize=replace(config.discretize, start=start))
+    estimate = estimate_run(scene, config, evaluate_config, extra_placements)
+    if over_limits(estimate) and not over_limits(estimate, factor=RECOUNT_FACTOR) and not force:
+        # the bound is loose (multi-level models): count the poses (seconds)
+        log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
+        poses = len(discretize(scene, config.discretize).world_from_cam)
+        estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
+    check_run_size(estimate, force=force, what="run size, a first guess before discretizing")
+    return config

@@ -1,12 +1,12 @@
 """Installed is not planned: compare the tags a person measured on the walls with the plan.
 
-The plan folder's cached stages are reused (:func:`~markerplace.plan.planner.prepare` with the
+The plan folder's cached stages are reused (:func:`~markerplace.pipelines.plan.prepare` with the
 run's configuration and ``--existing`` markers: nothing is rendered again when they match). The
 installed tags' coverages are computed by the same code as ``--existing`` markers and
-candidates: geometric visibility (:func:`~markerplace.plan.planner.geometric_visibility`),
+candidates: geometric visibility (:func:`~markerplace.plan.score.stage.geometric_visibility`),
 occlusion from a marker-free depth render at each pose that could see one
 (:meth:`~markerplace.imaging.engine.ImagingEngine.unoccluded`), information from the run's
-marker model (:func:`~markerplace.plan.planner.build_coverages`). A tag installed exactly as
+marker model (:func:`~markerplace.plan.score.stage.build_coverages`). A tag installed exactly as
 planned therefore loses nothing.
 
 Pairing planned spots with installed tags (all in the internal frame, metres):
@@ -192,20 +192,21 @@ def installed_coverages(scene_spec, world_from_cam: np.ndarray, markers: Sequenc
     only at the poses that could see one of them."""
     from markerplace.imaging.engine import EngineSpec, imaging_job
     from markerplace.imaging.visibility import marker_points
-    from markerplace.plan.planner import build_coverages, geometric_visibility
+    from markerplace.plan.score.stage import build_coverages, geometric_visibility
 
     if not markers:
         return []
     T = np.array([m.world_from_marker for m in markers], dtype=float)
     sizes = np.array([m.size for m in markers], dtype=float)
-    in_view = geometric_visibility(world_from_cam, T, config)
+    in_view = geometric_visibility(world_from_cam, T, config.imaging.camera, config.noise.max_range)
     todo = np.flatnonzero(in_view.any(axis=1))
     unoccluded = np.zeros_like(in_view)
     job = imaging_job(EngineSpec(scene_spec, config.imaging, {"installed": marker_points(T, sizes)}))
     items = [(world_from_cam[i], in_view[i]) for i in todo]
     for j, visible in executor.map(_occlusion_task, items, job):
         unoccluded[todo[j]] = visible
-    return build_coverages(world_from_cam, T, list(sizes), in_view & unoccluded, config)
+    return build_coverages(world_from_cam, T, list(sizes), in_view & unoccluded, config.placement.marker_model, config.noise,
+                           config.imaging.camera.K)
 
 
 def _scores_with(info: np.ndarray, score: np.ndarray, remove: Sequence[MarkerCoverage],
@@ -238,7 +239,7 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
     """Pair, score and explain (see module docstring).
 
     Args:
-        data: :class:`~markerplace.plan.planner.PlanData` of the plan (its existing markers' coverages
+        data: :class:`~markerplace.plan.types.PlanData` of the plan (its existing markers' coverages
             after the candidates).
         planned: placed markers (internal frame), placement order.
         planned_candidates: their candidate indices into ``data.coverages``.

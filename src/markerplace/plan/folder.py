@@ -1,6 +1,6 @@
 """A finished plan run folder read back: its scene, configuration and markers.
 
-``plan`` leaves ``config.json`` (the resolved :class:`~markerplace.plan.planner.PlanConfig`, the
+``plan`` leaves ``config.json`` (the resolved :class:`~markerplace.plan.config.PlanConfig`, the
 scene argument, ``scene_options`` = ``up``/``unit_scale``/``seed`` and the ``--existing``
 markers) and ``placement.json`` (the placed markers) in its folder; ``export`` and ``check``
 rebuild the run from them. Positions in both files are in the user's frame (z up, metres, the
@@ -52,7 +52,7 @@ class PlanFolder:
         scene: the scene argument of the run (built-in name or mesh path).
         scene_options: ``up``, ``unit_scale``, ``seed`` of the scene argument ({} for folders
             made before they were recorded).
-        config: the run's :class:`~markerplace.plan.planner.PlanConfig` (``start`` in the user frame).
+        config: the run's :class:`~markerplace.plan.config.PlanConfig` (``start`` in the user frame).
         markers: placed markers in placement order, user frame (poses rounded to 1e-6 as
             placement.json stores them).
         records: placement.json's marker records.
@@ -100,7 +100,7 @@ def _read_json(path: Path, what: str) -> dict:
 def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
     """Read a plan folder. Raises :class:`UserError` (one line) for a missing folder, a folder
     that is not a finished plan run, or damaged files."""
-    from markerplace.plan.planner import PlanConfig
+    from markerplace.plan.config import PlanConfig
 
     path = Path(path)
     if not path.is_dir():

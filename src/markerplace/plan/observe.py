@@ -15,7 +15,9 @@ interrupted run resumes from them).
 from __future__ import annotations
 
 import logging
+from contextlib import nullcontext
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -24,10 +26,14 @@ from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import marker_points
 from markerplace.progress import progress_bar
+from markerplace.runtime import cache
+from markerplace.runtime.executor import RuntimeConfig, make_executor
+from markerplace.runtime.stages import cached
+from markerplace.tagfamily import DRAWING_VERSION
 
 log = logging.getLogger(__name__)
 
-__all__ = ["observe"]
+__all__ = ["observe", "run_observe"]
 
 
 def _observe_task(engine, item) -> ImageFeatures:
@@ -74,3 +80,38 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
             writer.add(todo[j], feats)
             bar.update()
     return writer.finish()
+
+
+def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_poses: np.ndarray, sizes: list,
+                in_view: np.ndarray, config: ImagingConfig, run_dir: Path, executor, runtime: RuntimeConfig,
+                timings: dict, progress: bool = True, before: Callable[[], None] | None = None) -> tuple[FeatureSet, str]:
+    """The observe stage of a run folder: ``run_dir/observations/``, reused while the
+    discretization (its key and file digest), the imaging settings, the tag drawing and the
+    marker poses and sizes are unchanged; an interrupted stage resumes from its parts.
+
+    Args:
+        world_from_cam: (N, 4, 4) the discretization's camera poses.
+        marker_poses: (M, 4, 4) candidates then existing markers; ``sizes`` (M,) metres.
+        in_view: (N, M) bool geometric visibility (only those are tested for occlusion).
+        executor: where the work runs; None: one made from ``runtime`` when the stage runs.
+        before: called when the stage must run, before anything renders (the run-size check).
+
+    Returns:
+        (the features, the stage's cache key).
+    """
+    key = cache.hash_of("observe-v3", DRAWING_VERSION, disc_key, cache.content_digest(run_dir / "discretization.npz"),
+                        config, marker_poses, sizes)
+
+    def compute() -> FeatureSet:
+        log.info("observe: rendering and extracting SIFT at %d poses", len(world_from_cam))
+        with make_executor(runtime) if executor is None else nullcontext(executor) as ex:
+            return observe(scene_spec, world_from_cam, in_view, marker_poses, np.asarray(sizes, float), config, ex,
+                           run_dir / "observations", key, progress=progress)
+
+    if before is not None and not cache.is_fresh(run_dir / "observations", key):
+        before()
+    obs = cached("observe", run_dir / "observations", key, compute, None, FeatureSet.load, timings)
+    log.info("observe: %d features with 3D points (%.0f per pose)", len(obs.image_index),
+             len(obs.image_index) / max(len(world_from_cam), 1))
+    return obs, key
+

@@ -1,5 +1,5 @@
-"""``markerplace check PLAN_DIR --installed installed.json``: run the comparison of
-:mod:`markerplace.plan.check` on a plan folder and write what it found.
+"""What ``markerplace check`` writes (:func:`markerplace.pipelines.check.run_check` runs the
+comparison of :mod:`markerplace.plan.check` on a plan folder).
 
 Outputs (default folder ``PLAN_DIR/check/``), every position in the user's frame (z up,
 metres, the file's coordinates):
@@ -27,83 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.errors import UserError
 from markerplace.runtime.atomic_io import atomic_path, fixed, write_json
 from markerplace.runtime import run_folder
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_installed", "run_check"]
+__all__ = ["write_check_outputs"]
 
 WORST_LOCATIONS = 5
 LOSS_TOLERANCE = 1e-6
 """Score drops below this (nats) are rounding: installed poses read back from placement.json
 differ from the planned ones in the last digits."""
-
-
-def load_installed(path: str | Path, default_size: float) -> list:
-    """Installed markers (user frame) from placement.json's format or a plain list of
-    ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size. The checks of
-    :func:`markerplace.markers.load_markers` (JSON guards, integer tag36h11 ids listed once,
-    finite rigid poses)."""
-    from markerplace.markers import load_markers
-
-    return load_markers(path, "--installed", default_size=default_size)
-
-
-def _warn_off_wall(scene, markers) -> None:
-    from markerplace.markers import check_markers_on_walls
-
-    for m in markers:
-        try:
-            check_markers_on_walls(scene, [m], "installed")
-        except UserError as err:
-            log.warning("%s (scored where it was measured)", err)
-
-
-def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
-              radius: float | None = None, workers: int = 1, progress: bool = True,
-              adopt: bool = False) -> tuple[Path, str]:
-    """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
-    (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
-    not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
-    folder and the text summary printed by the CLI."""
-    from markerplace.plan import check
-    from markerplace.plan.folder import read_plan_folder
-    from markerplace.plan.planner import prepare
-    from markerplace.runtime.executor import RuntimeConfig, make_executor
-    from markerplace.scene.worldframe import markers_to_internal, world_offset
-
-    folder = read_plan_folder(plan_dir)
-    installed_user = load_installed(installed_path, folder.config.placement.tag_size)
-    out = Path(out_dir) if out_dir is not None else folder.path / "check"
-    run_folder.open_run_folder(folder.path, "check", adopt=adopt, option="PLAN_DIR")  # its caches may be rewritten
-    run_folder.open_run_folder(out, "check", adopt=adopt)
-    spec = folder.spec
-    scene = spec.load()
-    offset = world_offset(scene)
-    config = folder.config_in_scene_frame(offset)
-    installed = markers_to_internal(installed_user, offset)
-    _warn_off_wall(scene, installed)
-    existing = markers_to_internal(folder.existing, offset)
-    ex = make_executor(RuntimeConfig(workers=workers))
-    try:
-        data = prepare(spec, config, folder.path, existing=existing, progress=progress, executor=ex)
-        planned = markers_to_internal(folder.markers, offset)
-        cands = [int(r.get("candidate_index", -1)) for r in folder.records]
-        disc_T = data.disc.candidate_world_from_marker
-        for m, c in zip(planned, cands):
-            if not 0 <= c < data.num_candidates or np.abs(disc_T[c] - m.world_from_marker).max() > 1e-4:
-                raise UserError(f"{folder.path}: placement.json does not match the folder's cached stages (tag "
-                                f"{m.tag_id}); re-run `markerplace plan` into it")
-        covs = check.installed_coverages(spec, data.disc.world_from_cam, installed, config, ex)
-    finally:
-        ex.close()
-    planned = [type(m)(m.tag_id, m.size, disc_T[c].copy(), m.family) for m, c in zip(planned, cands)]
-    result = check.compare(data, planned, cands, installed, covs,
-                           radius=check.MATCH_RADIUS_M if radius is None else radius)
-    text = _write(out, result, offset, folder, installed_user)
-    return out, text
 
 
 def _user(T, offset):
@@ -112,7 +46,7 @@ def _user(T, offset):
     return None if T is None else poses_to_user(T, offset)
 
 
-def _write(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
+def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
     from markerplace.scene.worldframe import discretization_to_user
     from markerplace.report.deliverables import write_known_tag_maps
     from markerplace.report.figures import floor_map, per_location_mean

@@ -51,7 +51,7 @@ from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
-from markerplace.testbed.predict import ImageSet, predict_placements
+from markerplace.testbed.predict import ImageSet, PredictContext, predict_placements
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
 
     Args:
         scene_spec: the scene.
-        data: the prepared plan (:func:`markerplace.plan.planner.prepare`); updated in place.
+        data: the prepared plan (:func:`markerplace.pipelines.plan.prepare`); updated in place.
         plan_config: the plan's settings.
         run_dir: the plan folder (``success_model_<method>.json`` goes here).
         executor: where renders and localizations run.
@@ -167,7 +167,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         imaging_config: the testbed's imaging (default: the plan's camera, OpenCV SIFT).
     """
     from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
-    from markerplace.plan.planner import coverages_with_model
+    from markerplace.plan.score.stage import coverages_with_model
     from markerplace.plan.score.success_model import SuccessModel, fit_success_model
     from markerplace.testbed.config import LocalizationConfig
 
@@ -180,7 +180,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
             continue
         conf = method_named(name, plan_config.placement).conf
         offgrid = conf.calibration_poses == "offgrid"
-        covs = coverages_with_model(data, plan_config, conf.tag_model)
+        covs = coverages_with_model(data, conf.tag_model, plan_config.noise, plan_config.imaging.camera.K)
         C = data.num_candidates
         kc = min(C, int(conf.calibration_k))
         rng = np.random.default_rng(conf.calibration_seed)
@@ -224,8 +224,8 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
                 what = "off-grid images localized against the map"
             # (its renders are not kept: the fitted model is what is cached, and its random tag
             # sets rarely recur in an evaluation)
-            preds = predict_placements(tb, placements, map_base, {image_set.name: image_set}, codebook, cb_key, lcfg,
-                                       imaging, folder, timings, keep_renders=False)
+            ctx = PredictContext(tb, map_base, codebook, cb_key, lcfg, imaging, folder, timings, keep_renders=False)
+            preds = predict_placements(ctx, placements, {image_set.name: image_set})
             s, y, tagged = _pairs(data, covs, map_successes(preds, true_poses, set_name=image_set.name), sets, source)
             model = fit_success_model(s, y)
             log.info("calibration (%s, %s model): %d %s, %d of %d samples succeed (%d with tags); "
@@ -256,7 +256,7 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
         model name -> dict with ``score``, ``success``, ``tagged`` arrays and ``placements``
         (the (method, run, k) keys used).
     """
-    from markerplace.plan.planner import coverages_with_model
+    from markerplace.plan.score.stage import coverages_with_model
 
     sets = {}
     for p in placements:
@@ -269,6 +269,6 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
         sets[(p.method, p.run, p.k)] = cands
     out = {}
     for model in models:
-        s, y, tagged = _pairs(data, coverages_with_model(data, plan_config, model), success, sets)
+        s, y, tagged = _pairs(data, coverages_with_model(data, model, plan_config.noise, plan_config.imaging.camera.K), success, sets)
         out[model] = {"score": s, "success": y, "tagged": tagged, "placements": list(sets)}
     return out

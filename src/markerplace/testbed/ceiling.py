@@ -31,12 +31,14 @@ import numpy as np
 
 from markerplace.markers import FAMILY, Marker
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun
+from markerplace.testbed.calibration import MAP_SET
+from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, with_candidate_ids
+from markerplace.testbed.predict import PredictContext, predict_placements
 
 log = logging.getLogger(__name__)
 
 __all__ = ["SINGLE", "CEILING", "single_placements", "oracle_order", "ceiling_placements", "ceiling_markdown",
-           "single_tag_hits", "single_tag_outcomes", "covered", "held_out_gains", "held_out_estimate"]
+           "single_tag_hits", "single_tag_outcomes", "covered", "held_out_gains", "held_out_estimate", "run_ceiling"]
 
 SINGLE, CEILING = RESERVED_NAMES
 """Method names of the one-tag placements (run = candidate index) and of the oracle placements."""
@@ -280,3 +282,30 @@ def ceiling_markdown(rows: list[dict], estimate: dict, ks: Sequence[int], thresh
                     f"{gains[k][i] - gains[k][2]:+.1f}" if k in gains else "-" for k in ks) + " |")
         lines.append("")
     return "\n".join(lines)
+
+
+def run_ceiling(ctx: PredictContext, placements: list, singles: list, sets: dict, test_poses: dict,
+                candidate_world_from_marker: np.ndarray, tag_size: float, ks: Sequence[int], seed: int,
+                threshold, by_spot: bool) -> tuple[list, dict, dict, dict]:
+    """The oracle ceiling of an evaluation: every candidate alone on the test images, then the
+    oracle's greedy picks per k evaluated as placements.
+
+    Args:
+        placements: the evaluated placements, the marker-free one first; ``singles`` one per
+            candidate (:func:`single_placements`).
+        sets: image sets by name (the map's own set is left out here).
+        by_spot: tag codes by candidate spot (``--tag-ids candidate``).
+
+    Returns:
+        (the ceiling placements, their predictions and the singles', the greedy estimate
+        per k, the held-out estimate per k).
+    """
+    test_sets = {name: s for name, s in sets.items() if name != MAP_SET}
+    predictions = predict_placements(ctx, placements[:1] + singles, test_sets)
+    outcomes = single_tag_outcomes(predictions, test_poses, len(candidate_world_from_marker), threshold)
+    ceiling_runs, estimate = ceiling_placements(candidate_world_from_marker, tag_size, outcomes, ks)
+    held_out = held_out_estimate(outcomes, ks, seed)
+    if by_spot:
+        ceiling_runs = with_candidate_ids(ceiling_runs, candidate_world_from_marker)
+    predictions.update(predict_placements(ctx, placements[:1] + ceiling_runs, test_sets))
+    return ceiling_runs, predictions, estimate, held_out

@@ -8,6 +8,7 @@ once.
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,8 +18,10 @@ from markerplace.imaging.config import SIFT_DEFAULT
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.predict import ImageSet, PredictContext
 
-__all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "vlad_codebook"]
+__all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "vlad_codebook",
+           "marker_free_images"]
 
 
 def testbed_imaging_config(plan_config, imaging_config=None):
@@ -58,3 +61,30 @@ def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages,
                                                  num_clusters=num_clusters, seed=seed),
                       lambda cb, p: cb.save(p), VladCodebook.load, timings)
     return codebook, key
+
+
+def marker_free_images(tb: TestbedImaging, map_poses: np.ndarray, test_poses: dict, cache_dir: Path, base_key: str,
+                       imaging, localization, seed: int, timings: dict,
+                       reuse: bool = True) -> tuple[PredictContext, dict]:
+    """The marker-free side of one evaluation: map features, the VLAD codebook and the query
+    features of every test set (each cached in ``cache_dir``).
+
+    ``reuse``: predictions reuse the marker-free result where a placement cannot change it.
+
+    Returns:
+        (the :class:`~markerplace.testbed.predict.PredictContext` every prediction shares,
+        test set name -> :class:`~markerplace.testbed.predict.ImageSet`).
+    """
+    t0 = time.perf_counter()
+    map_base = map_images(tb, map_poses, cache_dir, base_key)
+    timings["map_no_markers"] = time.perf_counter() - t0
+    codebook, cb_key = vlad_codebook(cache_dir, base_key, imaging, map_base, localization.vlad_clusters, seed, timings)
+    t0 = time.perf_counter()
+    sets = {ts: ImageSet(ts, tp.world_from_cam, BaseImages(tb, tp.world_from_cam, cache_dir / f"query_base_{ts}",
+                                                          cache.hash_of(base_key, tp.world_from_cam), False,
+                                                          f"queries {ts}"))
+            for ts, tp in test_poses.items()}
+    timings["queries_no_markers"] = time.perf_counter() - t0
+    ctx = PredictContext(tb, map_base, codebook, cb_key, localizer_spec(localization, seed), imaging, cache_dir, timings,
+                         reuse)
+    return ctx, sets

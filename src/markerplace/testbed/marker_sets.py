@@ -141,8 +141,8 @@ def build_placements(data, placement_config, config,
     """Every marker set to evaluate, in processing order.
 
     Args:
-        data: the planner's :class:`~markerplace.plan.planner.PlanData` (one ``prepare``).
-        placement_config: the planner's :class:`~markerplace.plan.planner.PlacementConfig` (v,
+        data: the planner's :class:`~markerplace.plan.types.PlanData` (one ``prepare``).
+        placement_config: the planner's :class:`~markerplace.plan.place.config.PlacementConfig` (v,
             marker model, tag size, similarity, placement seed).
         config: the :class:`~markerplace.testbed.config.EvaluateConfig` (its study: methods,
             runs, ks, tag scale, shift; its pose seed for the shift signs).
@@ -155,7 +155,7 @@ def build_placements(data, placement_config, config,
     """
     from dataclasses import replace
 
-    from markerplace.plan.planner import place
+    from markerplace.plan.place.stage import place
 
     study = config.study
     ks = sorted(set(study.ks))

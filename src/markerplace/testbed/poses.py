@@ -22,7 +22,9 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
+from markerplace.runtime import cache
 from markerplace.runtime.atomic_io import write_npz
+from markerplace.runtime.stages import cached
 
 TEST_SETS = ("weighted", "uniform")
 
@@ -220,3 +222,21 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
     positions[:, :2] += dxy
     poses = world_from_cam_poses(positions, yaws[idx] + dyaw)
     return TestPoses(poses, idx.astype(np.int64), dxy, dyaw)
+
+
+def cached_test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
+    """The test poses of every test set of an evaluation, ``out/test_poses_<set>.npz``, reused
+    while the map, the scores and the settings are unchanged. A set's seed does not depend on
+    which other sets run. Returns test set name -> :class:`TestPoses`."""
+    map_poses = np.asarray(data.disc.world_from_cam, float)
+    is_free = free_space_of(data.disc, config.test.min_clearance)
+    poses = {}
+    for ts in config.test.sets:
+        tcfg = TestPoseConfig(num=config.test.tests, mode=ts, seed=config.pose_seed + 1000 * TEST_SETS.index(ts),
+                              min_clearance=config.test.min_clearance)
+        key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing)
+        poses[ts] = cached("test_poses", out / f"test_poses_{ts}.npz", key,
+                           lambda: sample_test_poses(map_poses, data.base_score, plan_config.discretize.grid_spacing,
+                                                     tcfg, is_free),
+                           lambda tp, path: tp.save(path), TestPoses.load, timings)
+    return poses

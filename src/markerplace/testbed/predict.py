@@ -20,7 +20,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -54,7 +54,7 @@ class ImageSet:
     own: bool = False
 
 __all__ = ["ImageSet", "Retrieval", "RenderedFeatures", "PlacementMap", "PlacementMaps", "localize_set",
-           "predict_placements"]
+           "PredictionKey", "PredictContext", "predict_placements"]
 
 log = logging.getLogger(__name__)
 
@@ -266,43 +266,73 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
 
 
 
-def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, sets: dict, codebook, cb_key: str, lcfg,
-                       imaging, cache_dir: Path, timings: dict, reuse: bool = True, keep_renders: bool = True) -> dict:
-    """Estimates of every image set against every placement's map, cached per (placement, set).
+class PredictionKey(NamedTuple):
+    """Names one prediction: the placement (method, run, budget k) and the image set."""
 
-    Args:
+    method: str
+    run: int
+    k: int
+    test_set: str
+
+
+@dataclass(frozen=True, eq=False)
+class PredictContext:
+    """What every prediction of one evaluation shares.
+
+    Attributes:
         tb: the testbed's imaging (and executor).
-        placements: :class:`~markerplace.testbed.marker_sets.PlacementRun` list; the marker-free
-            one (``none``) first, so that the others can reuse its results. A placement with
-            ``test_sets`` is localized on those sets only (``map`` is always localized).
         map_base: marker-free map features.
-        sets: name -> :class:`ImageSet`.
-        codebook: the VLAD codebook; ``cb_key`` its cache key (it fixes the map).
-        lcfg: (localizer name, settings).
+        codebook: the VLAD codebook; ``codebook_key`` its cache key (it fixes the map).
+        localizer: (localizer name, settings) (:func:`~markerplace.testbed.map_setup.localizer_spec`).
         imaging: the testbed's imaging config (part of the cache keys).
         cache_dir: ``predictions/`` and the temporary map folders go here.
         timings: ``map_with_markers`` and ``localize`` seconds are added.
         reuse: reuse the marker-free result where a placement cannot change it (exact).
         keep_renders: keep every render with markers in ``cache_dir/renders``
             (:class:`RenderStore`) and read back the ones earlier placements or runs made.
+    """
+
+    tb: TestbedImaging
+    map_base: BaseImages
+    codebook: object
+    codebook_key: str
+    localizer: tuple
+    imaging: object
+    cache_dir: Path
+    timings: dict
+    reuse: bool = True
+    keep_renders: bool = True
+
+
+def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
+    """Estimates of every image set against every placement's map, cached per (placement, set).
+
+    Args:
+        ctx: what the predictions share (:class:`PredictContext`).
+        placements: :class:`~markerplace.testbed.marker_sets.PlacementRun` list; the marker-free
+            one (``none``) first, so that the others can reuse its results. A placement with
+            ``test_sets`` is localized on those sets only (``map`` is always localized).
+        sets: name -> :class:`ImageSet`.
 
     Returns:
-        (method, run, k, set name) -> (Q, 4, 4) estimates, NaN where localization failed.
+        :class:`PredictionKey` -> (Q, 4, 4) estimates, NaN where localization failed.
     """
+    tb, map_base, codebook, cb_key, lcfg = ctx.tb, ctx.map_base, ctx.codebook, ctx.codebook_key, ctx.localizer
+    imaging, cache_dir, timings = ctx.imaging, ctx.cache_dir, ctx.timings
     from markerplace.localization.localizer import LOCALIZERS
 
     pred_dir = cache_dir / "predictions"
     timings.setdefault("map_with_markers", 0.0)
     timings.setdefault("localize", 0.0)
-    predictions: dict[tuple, np.ndarray] = {}
+    predictions: dict[PredictionKey, np.ndarray] = {}
     from markerplace.registry import configure
 
     name, settings = lcfg
     conf = configure(LOCALIZERS.lookup(name).default_conf, dict(settings))
     retrieval = None
-    if reuse and name == "sift_pnp" and map_base.world_from_cam.size:
+    if ctx.reuse and name == "sift_pnp" and map_base.world_from_cam.size:
         retrieval = Retrieval(codebook, map_base, conf.num_candidates)
-    store = RenderStore(cache_dir / "renders") if keep_renders else None
+    store = RenderStore(cache_dir / "renders") if ctx.keep_renders else None
     maps = PlacementMaps(tb, map_base, codebook, retrieval, store)
     rendered = {s.name: RenderedFeatures(store, s.base.key) for s in sets.values()}
     reused = 0
@@ -317,7 +347,7 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
                                                         s.exclude, marker_arr, lcfg, imaging)
             est = load_prediction(pred_dir, key)
             if est is not None:
-                predictions[(p.method, p.run, p.k, s.name)] = est
+                predictions[PredictionKey(p.method, p.run, p.k, s.name)] = est
             else:
                 pending.append((s, key))
         if not pending:
@@ -329,13 +359,13 @@ def predict_placements(tb: TestbedImaging, placements, map_base: BaseImages, set
             t0 = time.perf_counter()
             for s, key in pending:
                 est, localized = localize_set(tb, pmap, p.markers, lcfg, s.world_from_cam, s.base.in_view,
-                                              s.base.features, predictions.get((NO_MARKERS, 0, 0, s.name)), retrieval,
+                                              s.base.features, predictions.get(PredictionKey(NO_MARKERS, 0, 0, s.name)), retrieval,
                                               s.name, f"localize {s.name} {p.method} k={p.k} run {p.run}",
                                               s.exclude, s.own, rendered[s.name])
                 reused += len(est) - localized
                 save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=s.name,
                                 localized=localized)
-                predictions[(p.method, p.run, p.k, s.name)] = est
+                predictions[PredictionKey(p.method, p.run, p.k, s.name)] = est
             timings["localize"] += time.perf_counter() - t0
     if reused:
         log.info("localize: %d images no placement's markers could change took the no-marker result", reused)

@@ -152,7 +152,7 @@ def excluded(exclusion: Exclusion, positions: np.ndarray) -> np.ndarray:
 
 
 def exclude_candidates(data, drop: np.ndarray):
-    """The :class:`~markerplace.plan.planner.PlanData` without the candidates where (C,) bool
+    """The :class:`~markerplace.plan.types.PlanData` without the candidates where (C,) bool
     ``drop`` is true (existing markers stay; the calibration's coverages follow)."""
     drop = np.asarray(drop, bool)
     C = data.num_candidates
@@ -171,7 +171,7 @@ def exclude_candidates(data, drop: np.ndarray):
 
 
 def apply_exclusion(data, exclusion: Exclusion, offset, k: int):
-    """``data`` (:class:`~markerplace.plan.planner.PlanData`, internal frame) without the
+    """``data`` (:class:`~markerplace.plan.types.PlanData`, internal frame) without the
     candidates ``exclusion`` (user frame) covers; ``offset`` (3,) is the scene's
     :func:`~markerplace.scene.worldframe.world_offset`. Logs how many went.
 

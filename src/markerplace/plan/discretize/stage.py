@@ -31,14 +31,19 @@ The result, :class:`~markerplace.plan.discretize.artifact.Discretization`, and i
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from markerplace import geometry
 from markerplace.errors import UserError
+from markerplace.runtime import cache
+from markerplace.runtime.stages import cached
 from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.artifact import Discretization
+from markerplace.plan.discretize.artifact import load as load_discretization
+from markerplace.plan.discretize.artifact import save as save_discretization
 from markerplace.plan.discretize.floorplan import eye_level_support, storey_floor
 from markerplace.plan.discretize.freespace import Sections, StoreySpace, camera_locations, free_space, obstacle_mask, open_fractions
 from markerplace.plan.discretize.grid import Grid
@@ -47,7 +52,7 @@ from markerplace.plan.discretize.wall_candidates import RULES, CandidateConfig, 
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DiscretizeConfig", "candidate_arithmetic", "discretize"]
+__all__ = ["DiscretizeConfig", "candidate_arithmetic", "discretize", "run_discretize"]
 
 
 @dataclass(frozen=True)
@@ -363,3 +368,20 @@ def _storey_report(s: int, floor_z: float, grid: Grid, open_floor: np.ndarray, s
     return {"storey": s, "floor_z": floor_z, "open_floor_m2": floor_area, "free_m2": space.free_area,
             "covered_m2": covered_area, "locations": int(len(xy)), "candidates": n_cand,
             "unreached": [{"area_m2": a, "centre": [float(v) for v in c]} for a, c in space.unreached]}
+
+
+def run_discretize(scene, config: DiscretizeConfig, run_dir: Path, timings: dict) -> tuple[Discretization, str]:
+    """The discretize stage of a run folder: ``run_dir/discretization.npz``, reused while the
+    scene (geometry, part names, glass) and ``config`` are unchanged.
+
+    Returns:
+        (the discretization, the stage's cache key, which the later stages' keys include).
+    """
+    # the parts' names and glass decide which wall spots may carry a tag (discretize.wall_candidates)
+    labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
+    key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config)
+    disc = cached("discretize", run_dir / "discretization.npz", key, lambda: discretize(scene, config),
+                  save_discretization, load_discretization, timings)
+    log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
+             len(disc.locations), config.num_yaws, len(disc.world_from_cam), len(disc.candidate_world_from_marker))
+    return disc, key

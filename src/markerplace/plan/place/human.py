@@ -3,7 +3,7 @@
 The paper's real experiment compares OMP with tags "placed by a human": "the human prioritizes
 centers in less textured areas". :func:`human_placement` does that deterministically (no seed;
 every tie goes to the lower index) from what a plan run already has, the candidate marker poses
-and the map images' SIFT points (:class:`~markerplace.plan.planner.PlanData`):
+and the map images' SIFT points (:class:`~markerplace.plan.types.PlanData`):
 
 1. **Wall stretches** (:func:`wall_stretches`): the candidates of one flat wall between corners,
    door openings or turns. Two candidates are linked when they are on the same storey, their
@@ -49,16 +49,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.grid import Grid
-
-if TYPE_CHECKING:  # pragma: no cover
-    from markerplace.plan.discretize.artifact import Discretization
-    from markerplace.plan.planner import PlanData
+from markerplace.plan.types import PlanData
 
 log = logging.getLogger(__name__)
 
@@ -340,7 +337,7 @@ def analyse(data: PlanData, conf: HumanConfig) -> WallAnalysis:
     disc = data.disc
     if getattr(data, "points_world", None) is None or getattr(data, "pose_index", None) is None:
         raise UserError("--method human needs the map images' SIFT points (PlanData.points_world): plan the scene "
-                        "with markerplace.plan.planner.prepare")
+                        "with markerplace.pipelines.plan.prepare")
     stretch_of, centre, spacing = wall_stretches(disc, conf)
     pos, nrm = np.asarray(disc.candidate_position, float), np.asarray(disc.candidate_normal, float)
     boxes = []

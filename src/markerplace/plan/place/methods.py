@@ -8,9 +8,9 @@
 * ``human``: :class:`HumanPlacement`, the paper's human baseline (centres of the least-textured
   wall stretches, spread over rooms; :mod:`markerplace.plan.place.human`).
 
-A method works on the planner's :class:`~markerplace.plan.planner.PlanData` (base information
+A method works on the planner's :class:`~markerplace.plan.types.PlanData` (base information
 per pose, one :class:`~markerplace.plan.place.greedy.MarkerCoverage` per candidate, then one per
-existing marker) and returns a :class:`Choice`; :func:`markerplace.plan.planner.place` turns it
+existing marker) and returns a :class:`Choice`; :func:`markerplace.plan.place.stage.place` turns it
 into markers with tag ids. ``evaluate`` reads each method's class attributes: a ``randomized``
 method is placed ``--runs`` times (seeds ``--placement-seed + run``) and is a baseline of the
 paired comparisons; a ``nested`` one is placed once with the largest k and its prefixes are the
@@ -28,22 +28,18 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
 from markerplace.registry import Registry, configure
 from markerplace.plan.place.human import HumanConfig, human_placement
 from markerplace.plan.place.baselines import random_placement, uniform_placement
+from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
 from markerplace.plan.place.greedy import apply_coverages, omp_greedy
-
-if TYPE_CHECKING:  # pragma: no cover
-    from markerplace.plan.planner import PlacementConfig, PlanData
+from markerplace.plan.types import PlanData
 
 log = logging.getLogger(__name__)
-
-#: Images ``expected-recall`` may fit its success model on (``--calibration-poses``).
-CALIBRATION_POSES = ("map", "offgrid")
 
 #: Every placement method by name, in registration order (``--method``, ``--methods``).
 PLACEMENT_METHODS = Registry("placement method", "--method")

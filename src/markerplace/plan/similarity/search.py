@@ -14,15 +14,13 @@ import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import faiss
 import numpy as np
 
+from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.plan.similarity.kernel import count_candidates
-
-if TYPE_CHECKING:
-    from markerplace.plan.similarity.stage import SimilarityConfig
 
 __all__ = ["BAND", "Pairs", "Searcher", "expand_search", "faiss_threads", "join_cells", "resolve_threads"]
 

@@ -48,66 +48,21 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from pathlib import Path
 
 import faiss
 import numpy as np
 
+from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.progress import progress_bar
+from markerplace.runtime import cache
+from markerplace.runtime.atomic_io import write_npz
+from markerplace.runtime.stages import cached
 from markerplace.plan.similarity.search import BAND, Pairs, Searcher, expand_search, faiss_threads, join_cells
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SimilarityConfig", "count_similar", "count_similar_exact", "count_similar_ivf"]
-
-@dataclass(frozen=True)
-class SimilarityConfig:
-    """Settings of the similarity analysis.
-
-    Attributes:
-        cos_threshold: descriptors with cosine similarity above this are similar (paper: 0.9).
-        min_distance: only points farther than this (metres, 3D) count (paper: 2.0).
-        method: ``"auto"``, ``"exact"`` or ``"ivf"`` (see module docstring). Default ``auto``.
-        exact_max_points: ``auto`` uses ``exact`` up to this many points (default 50,000).
-        nlist: IVF cells; 0 (default) = ``clip(round(nlist_factor * sqrt(P)), 16, 65536)``.
-        nlist_factor: cells per sqrt(point) when ``nlist`` is 0 (default 4).
-        nprobe: cells every point searches, nearest first (default 8: recall of look-alike pairs
-            >= 0.99 at 437k and 1.8M synthetic points, ``benchmarks/similarity.py``); more =
-            higher recall, slower.
-        nprobe_max: a point whose farther half of the ``nprobe`` cells held a look-alike
-            candidate (any 3D distance) searches the next ``nprobe`` cells, then the next
-            ``2 nprobe``, ..., while the last ring still holds one, up to this many cells in all
-            (default 128; ``nprobe_max <= nprobe`` turns this off). Dense groups of look-alikes
-            (repeated texture) span many k-means cells; this finds them without raising
-            ``nprobe`` for every point.
-        pca_dims: dimensions of the orthonormal PCA projection the ``ivf`` index searches
-            (default 64; 0 or >= D: the full descriptors). Shorter vectors scan faster; the
-            projection can only add candidates, which are then decided on the full descriptors.
-        train_points_per_cell: k-means training sample size per cell (default 40, FAISS's
-            recommended minimum is 39).
-        train_iters: k-means iterations (default 10).
-        batch: points per FAISS range-search call (default 16,384); bounds the memory of one
-            call's results (12 bytes per pair within the threshold, near pairs included).
-        threads: FAISS OpenMP threads; 0 (default) = the CPUs this process may run on. Results
-            do not depend on it.
-        seed: seed of the training sample and of FAISS's k-means (default 0).
-    """
-
-    cos_threshold: float = 0.9
-    min_distance: float = 2.0
-    method: str = "auto"
-    exact_max_points: int = 50000
-    nlist: int = 0
-    nlist_factor: float = 4.0
-    nprobe: int = 8
-    nprobe_max: int = 128
-    pca_dims: int = 64
-    train_points_per_cell: int = 40
-    train_iters: int = 10
-    batch: int = 16384
-    threads: int = 0
-    seed: int = 0
-
+__all__ = ["count_similar", "count_similar_exact", "count_similar_ivf", "run_similarity"]
 
 def _check(descriptors: np.ndarray, points_world: np.ndarray, config: SimilarityConfig) -> None:
     if descriptors.ndim != 2 or points_world.shape != (len(descriptors), 3):
@@ -254,3 +209,25 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
               time.perf_counter() - t2, time.process_time() - c2)
     return counts.astype(np.int32)
 
+
+
+def run_similarity(descriptors: np.ndarray, points_world: np.ndarray, observe_key: str, run_dir: Path,
+                   config: SimilarityConfig, enabled: bool, timings: dict, progress: bool = True) -> np.ndarray:
+    """The look-alike stage of a run folder: ``run_dir/similarity.npz``, reused while the
+    observations (their key and folder digest) and ``config`` are unchanged.
+
+    Args:
+        descriptors: (P, 128) SIFT descriptors of the observed points; ``points_world`` (P, 3) metres.
+        enabled: False: every count is 0 (``--no-similarity``), nothing is computed or written.
+
+    Returns:
+        (P,) int32 look-alike count of each point (:func:`count_similar`).
+    """
+    if not enabled:
+        timings["similarity"] = 0.0
+        return np.zeros(len(points_world), dtype=np.int32)
+    key = cache.hash_of("similarity-v3", observe_key, cache.content_digest(run_dir / "observations"), config)
+    return cached("similarity", run_dir / "similarity.npz", key,
+                  lambda: count_similar(descriptors, points_world, config, progress=progress),
+                  lambda n, path: write_npz(path, n_similar=n),
+                  lambda path: np.load(path, allow_pickle=False)["n_similar"], timings)

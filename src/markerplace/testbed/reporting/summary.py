@@ -43,7 +43,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     from markerplace.runtime.cache import config_dict
     from markerplace.testbed import metrics
 
-    results = {key: metrics.pose_errors_batch(est, test_poses[key[3]].world_from_cam) for key, est in predictions.items()}
+    results = {key: metrics.pose_errors_batch(est, test_poses[key.test_set].world_from_cam) for key, est in predictions.items()}
     labels = [metrics.threshold_label(t) for t in config.thresholds]
     rows = []
     arrays: dict[str, np.ndarray] = {}

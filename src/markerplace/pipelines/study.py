@@ -66,7 +66,8 @@ def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
 
 def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress: bool) -> dict:
     """OMP placements with the other v values and without similarity (internal frame)."""
-    from markerplace.plan.planner import place, prepare
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.place.stage import place
 
     k = plan_config.placement.k
     data = prepare(scene_spec, plan_config, work / "plan", progress=progress, k=k)
@@ -125,7 +126,7 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
         plan: what the study varies.
         progress: progress bars.
     """
-    from markerplace.testbed.experiment import run_evaluation
+    from markerplace.pipelines.evaluate import run_evaluation
     from markerplace.testbed.metrics import main_threshold, threshold_label
 
     out = Path(out_dir)

@@ -1,0 +1,82 @@
+"""``markerplace check PLAN_DIR --installed installed.json``: the tags as a person measured them
+on the walls, compared with the plan (:mod:`markerplace.plan.check`), and what it found written
+(:mod:`markerplace.report.check_report`). The plan folder's cached stages are reused
+(:func:`markerplace.pipelines.plan.prepare`)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from markerplace.errors import UserError
+from markerplace.markers import check_markers_on_walls, load_markers
+from markerplace.pipelines.plan import prepare
+from markerplace.plan import check
+from markerplace.plan.folder import read_plan_folder
+from markerplace.report.check_report import write_check_outputs
+from markerplace.runtime import run_folder
+from markerplace.runtime.executor import RuntimeConfig, make_executor
+from markerplace.scene.worldframe import markers_to_internal, world_offset
+
+log = logging.getLogger(__name__)
+
+__all__ = ["load_installed", "run_check"]
+
+
+def load_installed(path: str | Path, default_size: float) -> list:
+    """Installed markers (user frame) from placement.json's format or a plain list of
+    ``{tag_id, position, normal[, size]}``; a missing size is the plan's tag size. The checks of
+    :func:`markerplace.markers.load_markers` (JSON guards, integer tag36h11 ids listed once,
+    finite rigid poses)."""
+
+    return load_markers(path, "--installed", default_size=default_size)
+
+
+def _warn_off_wall(scene, markers) -> None:
+
+    for m in markers:
+        try:
+            check_markers_on_walls(scene, [m], "installed")
+        except UserError as err:
+            log.warning("%s (scored where it was measured)", err)
+
+
+def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
+              radius: float | None = None, workers: int = 1, progress: bool = True,
+              adopt: bool = False) -> tuple[Path, str]:
+    """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
+    (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
+    not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
+    folder and the text summary printed by the CLI."""
+    folder = read_plan_folder(plan_dir)
+    installed_user = load_installed(installed_path, folder.config.placement.tag_size)
+    out = Path(out_dir) if out_dir is not None else folder.path / "check"
+    run_folder.open_run_folder(folder.path, "check", adopt=adopt, option="PLAN_DIR")  # its caches may be rewritten
+    run_folder.open_run_folder(out, "check", adopt=adopt)
+    spec = folder.spec
+    scene = spec.load()
+    offset = world_offset(scene)
+    config = folder.config_in_scene_frame(offset)
+    installed = markers_to_internal(installed_user, offset)
+    _warn_off_wall(scene, installed)
+    existing = markers_to_internal(folder.existing, offset)
+    ex = make_executor(RuntimeConfig(workers=workers))
+    try:
+        data = prepare(spec, config, folder.path, existing=existing, progress=progress, executor=ex)
+        planned = markers_to_internal(folder.markers, offset)
+        cands = [int(r.get("candidate_index", -1)) for r in folder.records]
+        disc_T = data.disc.candidate_world_from_marker
+        for m, c in zip(planned, cands):
+            if not 0 <= c < data.num_candidates or np.abs(disc_T[c] - m.world_from_marker).max() > 1e-4:
+                raise UserError(f"{folder.path}: placement.json does not match the folder's cached stages (tag "
+                                f"{m.tag_id}); re-run `markerplace plan` into it")
+        covs = check.installed_coverages(spec, data.disc.world_from_cam, installed, config, ex)
+    finally:
+        ex.close()
+    planned = [type(m)(m.tag_id, m.size, disc_T[c].copy(), m.family) for m, c in zip(planned, cands)]
+    result = check.compare(data, planned, cands, installed, covs,
+                           radius=check.MATCH_RADIUS_M if radius is None else radius)
+    text = write_check_outputs(out, result, offset, folder, installed_user)
+    return out, text

@@ -1,0 +1,67 @@
+"""Every setting of a plan run: one sub-config per stage, composed into :class:`PlanConfig`.
+
+Each stage takes only its own sub-config (:class:`~markerplace.plan.discretize.stage.DiscretizeConfig`,
+:class:`~markerplace.imaging.config.ImagingConfig`, :class:`~markerplace.plan.similarity.config.SimilarityConfig`,
+:class:`~markerplace.plan.score.localizability.NoiseConfig`, :class:`~markerplace.plan.place.config.PlacementConfig`,
+:class:`~markerplace.runtime.executor.RuntimeConfig`); :class:`PlanConfig` is what a run saves as ``config.json``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace
+
+from markerplace.errors import UserError
+from markerplace.imaging.config import ImagingConfig
+from markerplace.plan.discretize.stage import DiscretizeConfig
+from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
+from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.plan.score.localizability import NoiseConfig
+from markerplace.plan.score.marker_models import MARKER_MODELS
+from markerplace.plan.similarity.config import SimilarityConfig
+from markerplace.runtime.executor import RuntimeConfig
+from markerplace.validation import check_plan_config
+
+__all__ = ["PlanConfig", "PlacementConfig", "validate", "warn_unused_settings"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory.
+
+    ``runtime`` (where the per-image work runs) changes speed, never results: it is left out of
+    every cache key.
+    """
+
+    discretize: DiscretizeConfig = field(default_factory=DiscretizeConfig)
+    imaging: ImagingConfig = field(default_factory=ImagingConfig)
+    similarity: SimilarityConfig = field(default_factory=SimilarityConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    placement: PlacementConfig = field(default_factory=PlacementConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
+
+    def __post_init__(self) -> None:
+        """Derive ``discretize.tag_size`` from ``placement.tag_size`` (the one home of the tag
+        size): whatever ``discretize.tag_size`` was given is replaced."""
+        if self.discretize.tag_size != self.placement.tag_size:
+            object.__setattr__(self, "discretize", replace(self.discretize, tag_size=self.placement.tag_size))
+
+
+def validate(config: PlanConfig) -> None:
+    """Raise :class:`UserError` for settings that cannot work."""
+    p = config.placement
+    PLACEMENT_METHODS.lookup(p.method)  # UserError naming the known ones
+    MARKER_MODELS.lookup(p.marker_model)
+    if p.calibration_poses not in CALIBRATION_POSES:
+        raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
+    check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
+
+
+def warn_unused_settings(config: PlanConfig) -> None:
+    """Log a warning for each setting that has no effect with the chosen method."""
+    p = config.placement
+    if p.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(p.method).calibrated:
+        log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
+                    "model)", p.calibration_poses, p.method)
