@@ -32,6 +32,11 @@ with slab-edge faces, and a 1 m balustrade guards its open sides upstairs.
 
 Everything else (walls, floors, ceilings, lights, furniture, pictures) comes from
 :func:`markerplace.scene.builtin.procedural.add_layout`, one :class:`Layout` per storey.
+The rooms (their types, furniture and pictures), the office posters and the doorways are data, in
+``scene/builtin/specs/campus.toml`` (TOML, format in its header and in :mod:`.spec_loader`; entries
+with ``levels`` are only on those storeys); this module lays out the offices, one per ``CELL`` of
+the south band where no room of the file stands, prefixes room names with ``l<storey>_`` and
+defines the stair opening (``"stair"`` in the file: :data:`HOLE`).
 
 ``Scene.meta`` keys (world metres): ``storeys`` (``[0.0, 3.0]``), ``storey_height``,
 ``ceiling_height``, ``slab_thickness``, ``stair`` (``{"x", "y", "bottom_z", "top_z", "risers",
@@ -46,9 +51,10 @@ from dataclasses import replace
 
 from markerplace.scene.builtin import textures as tx
 from markerplace.scene.builtin.furniture import palette, texture_fns
-from markerplace.scene.builtin.layout import Building, Door, Item, Layout, Picture, RoomSpec, chairs_around, wall_item, workstation
+from markerplace.scene.builtin.layout import Building, Door, Layout, RoomSpec
 from markerplace.scene.builtin.meshkit import Material, MeshBuilder, add_box
 from markerplace.scene.builtin.procedural import add_layout, layout_rooms, wall_material
+from markerplace.scene.builtin.spec_loader import SpecError, build_door, build_room, check_keys, read_spec
 from markerplace.scene.types import Scene
 from markerplace.scene.builtin.walls import door_span
 
@@ -62,12 +68,9 @@ CEILING_HEIGHT = 2.7
 SLAB = STOREY_HEIGHT - CEILING_HEIGHT
 STOREYS = 2
 CELL = 4.0  # office width
-SOUTH, CORRIDOR, NORTH = 5.5, 7.5, 21.5  # y of the office band's top, the corridor's top, the north wall
+SOUTH = 5.5  # y of the office band's top (the corridor's south wall)
 MID = 14.5  # y of the partition between the north band's front and back rooms
-OPEN_A, OPEN_B = (0.0, 16.0), (26.0, 42.0)  # x spans of the open-plan areas
-MEET_X, CORE_X, EAST_X = (16.0, 22.0), (22.0, 26.0), (42.0, 48.0)
-RECEPTION = (5, 7)  # ground floor: office cells [5, 7) are the reception
-POSTERS = ("art:11", "art:12", "art:13")  # office posters cycle through these
+CORE_X = (22.0, 26.0)  # x span of the stair hall and the copy room
 # stair: 15 risers x 0.2 m, 14 treads x 0.24 m along the stair hall's east wall, climbing -y
 RISERS, RISE, GOING = 15, STOREY_HEIGHT / 15, 0.24
 STAIR_X = (CORE_X[1] - 0.05 - 1.2, CORE_X[1] - 0.05)  # 1.2 m wide, against the east wall
@@ -76,228 +79,68 @@ STAIR_TOP_Y = round(STAIR_FOOT_Y - (RISERS - 1) * GOING, 6)
 HOLE = (STAIR_X[0], STAIR_TOP_Y, STAIR_X[1], STAIR_FOOT_Y)
 BALUSTRADE = (0.1, 1.0)  # thickness, height
 HT = 0.05  # half wall thickness
-STAIR_WALL = (232, 232, 226)
-OPEN_DOOR = CEILING_HEIGHT + 1.0  # a door at least this high is an opening up to the ceiling
 
 
 # ----------------------------------------------------------------------------------------------
-# room templates (room-local coordinates: metres from the room's (xmin, ymin) corner)
+# storeys (rooms and doors from specs/campus.toml)
 
 
-def _office(name: str, x0: float, poster: str) -> RoomSpec:
-    """One 4 m x 5.5 m office of the south band; its door is in the north wall, 1 m from the west."""
-    size = (CELL, SOUTH)
-    return RoomSpec(
-        name,
-        (x0, 0.0, x0 + CELL, SOUTH),
-        floor="carpet",
-        wall_color=(236, 234, 228),
-        items=(
-            *workstation(2.0, 0.45, 180.0),
-            wall_item("bookshelf", size, "E", 3.0),
-            wall_item("cabinet", size, "W", 1.0),
-            Item("plant", 3.45, 4.95),
-        ),
-        pictures=(Picture("W", 3.2, 0.8, poster),),
-        template="office",
-        lights=1,
-    )
+def _on_storey(entry, where: str, level: int) -> dict | None:
+    """A ``rooms`` / ``doors`` entry of the spec without its ``levels``, or None when it is not on
+    storey ``level`` (an entry without ``levels`` is on every storey)."""
+    if isinstance(entry, dict) and "levels" in entry:
+        levels = entry["levels"]
+        if not isinstance(levels, list) or not all(isinstance(n, int) and not isinstance(n, bool) for n in levels):
+            raise SpecError(f"{where}: levels: expected a list of storey numbers, got {levels!r}")
+        if level not in levels:
+            return None
+        return {k: v for k, v in entry.items() if k != "levels"}
+    return entry
 
 
-def _reception(name: str) -> RoomSpec:
-    x0, x1 = RECEPTION[0] * CELL, RECEPTION[1] * CELL
-    size = (x1 - x0, SOUTH)
-    return RoomSpec(
-        name,
-        (x0, 0.0, x1, SOUTH),
-        floor="wood",
-        wall_color=(240, 236, 226),
-        items=(
-            *workstation(3.3, 2.0, 0.0),
-            *workstation(4.7, 2.0, 0.0),
-            wall_item("sofa", size, "W", 3.5),
-            Item("coffee_table", 1.7, 3.5, 90.0),
-            Item("plant", 7.45, 0.5),
-            Item("plant", 7.45, 4.2),
-        ),
-        pictures=(Picture("S", 4.0, 1.6, "logo"), Picture("E", 2.75, 1.0, "hubble")),
-        lights=2,
-    )
+def _storey(spec: dict, where: str, level: int) -> Layout:
+    """Storey ``level`` (0 = ground floor): rooms and doors; room names start with ``l<level>_``.
 
-
-def _corridor(name: str, level: int) -> RoomSpec:
-    """The 48 m corridor; pictures hang between the doors (a different set on each storey)."""
-    photos = (("rocket", "camera", "moon", "coins", "retina"), ("chelsea", "clock", "motorcycle", "ihc", "gravel"))[level % 2]
-    south = [Picture("S", i * CELL + 3.0, 1.0, photos[k % len(photos)]) for k, i in enumerate((1, 3, 8, 10))]
-    north = [Picture("N", x, 1.2, photos[(k + 2) % len(photos)]) for k, x in enumerate((3.0, 13.0, 29.0, 39.0))]
-    return RoomSpec(name, (0.0, SOUTH, FOOTPRINT[2], CORRIDOR), floor="tiles", wall_color=(240, 240, 236),
-                    pictures=(*south, *north), lights=8)
-
-
-def _open_plan(name: str, x0: float) -> RoomSpec:
-    """A 16 m x 14 m open-plan area: three clusters of four desks, a lounge, shelves, a printer."""
-    size = (16.0, NORTH - CORRIDOR)
-    desks = []
-    for cx, cy in ((3.2, 4.2), (3.2, 9.8), (12.8, 9.8)):
-        for dx in (-0.7, 0.7):
-            desks += workstation(cx + dx, cy - 0.35, 0.0)
-            desks += workstation(cx + dx, cy + 0.35, 180.0)
-    lounge = (
-        Item("rug", 12.8, 4.4),
-        Item("coffee_table", 12.8, 4.2),
-        Item("sofa", 12.8, 5.3, 0.0),
-        Item("armchair", 11.6, 4.2, 90.0),
-        Item("armchair", 14.0, 4.2, -90.0),
-    )
-    return RoomSpec(
-        name,
-        (x0, CORRIDOR, x0 + size[0], NORTH),
-        floor="carpet",
-        wall_color=(234, 236, 232),
-        items=(
-            *desks,
-            *lounge,
-            wall_item("bookshelf", size, "N", 6.5),
-            wall_item("bookshelf", size, "N", 7.45),
-            wall_item("printer", size, "N", 9.3),
-            wall_item("cabinet", size, "W", 7.0),
-            Item("plant", 0.5, 13.5),
-            Item("plant", 15.5, 0.5),
-        ),
-        pictures=(
-            Picture("N", 3.2, 2.0, "whiteboard"),
-            Picture("N", 12.8, 1.2, "art:21"),
-            Picture("W", 4.2, 1.0, "art:22"),
-            Picture("E", 7.0, 0.8, "astronaut"),
-        ),
-        template="open_plan",
-        lights=6,
-    )
-
-
-def _meeting(name: str, x0: float, y0: float) -> RoomSpec:
-    """A 6 m x 7 m meeting room: a big table with four chairs, a TV, a whiteboard."""
-    size = (6.0, 7.0)
-    return RoomSpec(
-        name,
-        (x0, y0, x0 + size[0], y0 + size[1]),
-        floor="wood",
-        wall_color=(226, 231, 236),
-        items=(
-            Item("big_table", 3.0, 3.5),
-            *chairs_around(3.0, 3.5, 0.55, (-0.6, 0.6)),
-            wall_item("tv_stand", size, "N", 3.0),
-        ),
-        pictures=(Picture("E", 3.5, 1.6, "whiteboard"), Picture("S", 1.2, 0.8, "brick")),
-        template="meeting",
-        lights=2,
-    )
-
-
-def _kitchen(name: str) -> RoomSpec:
-    size = (6.0, 7.0)
-    return RoomSpec(
-        name,
-        (EAST_X[0], CORRIDOR, EAST_X[1], MID),
-        floor="tiles",
-        wall_color=(240, 233, 216),
-        items=(
-            wall_item("counter", size, "E", 2.0),
-            wall_item("fridge", size, "E", 3.8),
-            Item("table", 3.0, 5.2),
-            *chairs_around(3.0, 5.2, 0.45, (-0.4, 0.4)),
-            Item("plant", 0.5, 6.5),
-        ),
-        pictures=(Picture("N", 3.0, 0.8, "coffee"),),
-        lights=2,
-    )
-
-
-def _copy_room(name: str) -> RoomSpec:
-    size = (4.0, 7.0)
-    return RoomSpec(
-        name,
-        (CORE_X[0], MID, CORE_X[1], NORTH),
-        floor="tiles",
-        wall_color=(230, 230, 225),
-        items=(
-            wall_item("printer", size, "N", 2.0),
-            wall_item("bookshelf", size, "E", 2.5),
-            wall_item("bookshelf", size, "E", 3.45),
-            wall_item("bookshelf", size, "E", 4.4),
-            wall_item("cabinet", size, "W", 4.0),
-        ),
-        pictures=(Picture("W", 2.0, 0.6, "page"),),
-        template="copy_room",
-        lights=1,
-    )
-
-
-def _stair_hall(name: str, level: int) -> RoomSpec:
-    """The stair hall: the ground floor's has the flight and a ceiling opening above it, the
-    upper floor's the opening in its floor."""
-    holes = {"ceiling_holes": (HOLE,)} if level == 0 else {"floor_holes": (HOLE,)}
-    return RoomSpec(name, (CORE_X[0], CORRIDOR, CORE_X[1], MID), floor="wood_dark", wall_color=STAIR_WALL,
-                    pictures=(Picture("W", 4.5, 0.8, "text"),), lights=1, **holes)
-
-
-# ----------------------------------------------------------------------------------------------
-# storeys
-
-
-def _storey(level: int) -> Layout:
-    """Storey ``level`` (0 = ground floor): rooms and doors; room names start with ``l<level>_``."""
+    First the south band's offices, one per ``CELL`` where no room of the spec stands (the
+    ground floor's reception takes two), office k with poster k mod 3; then the spec's rooms."""
     p = f"l{level}_"
-    rooms, doors = [], []
+    types = spec.get("room_types", {})
+    rooms = []
+    for i, e in enumerate(spec["rooms"]):
+        e = _on_storey(e, f"{where}: rooms[{i}]", level)
+        if e is not None:
+            named = {**e, "name": p + e["name"]} if isinstance(e.get("name"), str) else e
+            rooms.append(build_room(named, f"{where}: rooms[{i}]", types, {"stair": HOLE}))
     corridor = p + "corridor"
-    cells = [i for i in range(int(FOOTPRINT[2] / CELL)) if level > 0 or not RECEPTION[0] <= i < RECEPTION[1]]
-    for k, i in enumerate(cells):
-        office = _office(f"{p}office_{i + 1:02d}", i * CELL, POSTERS[k % len(POSTERS)])
-        rooms.append(office)
-        doors.append(Door(office.name, corridor, at=0.25))
-    if level == 0:
-        rooms.append(_reception(p + "reception"))
-        doors.append(Door(corridor, p + "reception", width=4.0, height=OPEN_DOOR))
-    rooms.append(_corridor(corridor, level))
-    names = {"open_a": OPEN_A[0], "open_b": OPEN_B[0]}
-    for key, x0 in names.items():
-        rooms.append(_open_plan(p + key, x0))
-        doors.append(Door(corridor, p + key, width=4.0, height=OPEN_DOOR))
-    rooms += [
-        _meeting(p + "meeting_a", MEET_X[0], CORRIDOR),
-        _meeting(p + "meeting_b", MEET_X[0], MID),
-        _meeting(p + "meeting_c", EAST_X[0], MID),
-        _kitchen(p + "kitchen"),
-        _stair_hall(p + "stair_hall", level),
-        _copy_room(p + "copy_room"),
-    ]
-    doors += [
-        Door(p + "meeting_a", corridor),
-        Door(p + "open_a", p + "meeting_a"),
-        Door(p + "open_a", p + "meeting_b"),
-        Door(p + "open_b", p + "meeting_c"),
-        Door(p + "open_b", p + "kitchen"),
-        Door(p + "kitchen", corridor),
-        Door(p + "stair_hall", corridor, at=0.3),
-        Door(p + "copy_room", p + "stair_hall", at=0.3),
-    ]
+    offices, doors = [], []
+    for i in range(int(FOOTPRINT[2] / CELL)):
+        x0, x1 = i * CELL, i * CELL + CELL
+        if any(r.bounds[0] < x1 and x0 < r.bounds[2] and r.bounds[1] < SOUTH for r in rooms):
+            continue
+        poster = spec["office_posters"][len(offices) % len(spec["office_posters"])]
+        entry = {"name": f"{p}office_{i + 1:02d}", "room_type": "office", "bounds": (x0, 0.0, x1, SOUTH), "pictures": [poster]}
+        offices.append(build_room(entry, f"{where}: office {i + 1}", types))
+        doors.append(Door(offices[-1].name, corridor, at=0.25))
+    for k, e in enumerate(spec.get("doors", [])):
+        e = _on_storey(e, f"{where}: doors[{k}]", level)
+        if e is not None:
+            doors.append(build_door(e, f"{where}: doors[{k}]", prefix=p))
     what = "ground floor" if level == 0 else f"floor {level}"
-    return Layout("campus", what, tuple(rooms), doors=tuple(doors), ceiling_height=CEILING_HEIGHT,
+    return Layout(spec["name"], what, tuple(offices + rooms), doors=tuple(doors), ceiling_height=CEILING_HEIGHT,
                   floor_z=level * STOREY_HEIGHT)
 
 
 def campus_plan() -> Building:
     """The campus storeys (ground floor, upper floor)."""
-    storeys = tuple(_storey(level) for level in range(STOREYS))
+    spec, where = read_spec("campus")
+    check_keys(spec, where, ("name", "description", "office_posters", "rooms"), ("doors", "room_types"))
+    for key in ("office_posters", "rooms", "doors"):
+        if not isinstance(spec.get(key, []), list) or not spec.get(key, [None]):
+            raise SpecError(f"{where}: {key}: expected a non-empty list, got {spec[key]!r}")
+    storeys = tuple(_storey(spec, where, level) for level in range(STOREYS))
     area = sum(s.floor_area for s in storeys)
     offices = sum(r.template == "office" for s in storeys for r in s.rooms)
-    return Building(
-        "campus",
-        f"a two-storey office building ({area:.0f} m^2) for scale tests: {offices} offices furnished alike, "
-        "four open-plan areas, meeting rooms, kitchens, a stair",
-        storeys,
-        slab_thickness=SLAB,
-    )
+    return Building(spec["name"], spec["description"].format(area=area, offices=offices), storeys, slab_thickness=SLAB)
 
 
 def twin_pairs(plan: Building) -> list[tuple[str, str]]:
@@ -375,7 +218,7 @@ def build_campus(seed: int = 0) -> Scene:
     pal = palette()
     for storey in plan.storeys:
         add_layout(mb, storey, pal, seed)
-    stair_wall = wall_material(mb, STAIR_WALL)
+    stair_wall = wall_material(mb, next(r for r in plan.rooms if r.name == "l0_stair_hall").wall_color)
     with mb.labelled("stair"):
         _add_stair(mb, pal, stair_wall)
     with mb.labelled("wall"):  # the slab's edges continue the walls

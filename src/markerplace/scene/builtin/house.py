@@ -35,6 +35,9 @@ an opaque front door in the hall's east wall, both 0.9 m wide and 2.1 m high.
 
 Everything else (walls, floors, ceilings, lights, furniture, pictures, windows and doors) comes
 from :func:`markerplace.scene.builtin.procedural.add_layout`, one :class:`Layout` per storey.
+The storeys' rooms, furniture, pictures, windows and doorways are data, in
+``scene/builtin/specs/house.toml`` (TOML, format in its header and in :mod:`.spec_loader`);
+this module adds the storey heights and the stair opening (``"stair"`` in the file: :data:`HOLE`).
 
 ``Scene.meta`` keys (world metres; x/y spans are [min, max]):
 
@@ -62,9 +65,10 @@ import numpy as np
 
 from markerplace.scene.builtin import textures as tx
 from markerplace.scene.builtin.furniture import palette, texture_fns
-from markerplace.scene.builtin.layout import Building, Door, Item, Layout, Opening, Picture, RoomSpec, chairs_around, wall_item, workstation
+from markerplace.scene.builtin.layout import Building, Door, Layout
 from markerplace.scene.builtin.meshkit import Material, MeshBuilder, add_box
 from markerplace.scene.builtin.procedural import add_layout, layout_rooms, wall_material
+from markerplace.scene.builtin.spec_loader import build_layout, check_keys, read_spec
 from markerplace.scene.types import Scene
 from markerplace.scene.builtin.walls import door_span
 
@@ -75,7 +79,6 @@ __all__ = ["build_house", "house_plan"]
 STOREY_HEIGHT = 3.0
 CEILING_HEIGHT = 2.7
 SLAB = 0.3  # STOREY_HEIGHT - CEILING_HEIGHT
-SUNKEN = 0.25
 HT = 0.05  # half wall thickness
 # stair: 15 risers x 0.2 m, 14 treads x 0.24 m along the north wall, climbing towards -x
 RISERS, RISE, GOING = 15, STOREY_HEIGHT / 15, 0.24
@@ -84,193 +87,18 @@ STAIR_TOP_X = 6.05
 STAIR_FOOT_X = STAIR_TOP_X + (RISERS - 1) * GOING  # 9.41: the first riser
 HOLE = (STAIR_TOP_X, STAIR_Y[0], STAIR_FOOT_X, STAIR_Y[1])
 BALUSTRADE = (0.1, 1.0)  # thickness, height
-GLASS_WIDTH = 3.7
 GLASS_PANES = 4
 FRAME = 0.05  # glazing frame members: width (and rail height)
-NARROW = 0.7
-
-
-def _ground() -> Layout:
-    liv = (6.0, 4.0)
-    living = RoomSpec(
-        "living",
-        (0.0, 0.0, 6.0, 4.0),
-        floor="wood",
-        wall_color=(238, 234, 224),
-        floor_dz=-SUNKEN,
-        items=(
-            wall_item("sofa", liv, "W", 2.0),
-            wall_item("sofa", liv, "S", 2.3),
-            Item("rug", 2.0, 1.9),
-            Item("coffee_table", 2.0, 1.9),
-            wall_item("bookshelf", liv, "S", 3.85),
-            wall_item("bookshelf", liv, "S", 4.8),
-            Item("plant", 0.45, 3.45),
-        ),
-        pictures=(Picture("W", 2.0, 0.9, "chelsea", z_center=1.75),),
-        lights=2,
-    )
-    kit = (6.0, 3.5)
-    kitchen = RoomSpec(
-        "kitchen",
-        (0.0, 4.0, 6.0, 7.5),
-        floor="tiles",
-        wall_color=(242, 236, 220),
-        items=(
-            wall_item("counter", kit, "N", 3.4),
-            wall_item("fridge", kit, "N", 5.1),
-            Item("island", 3.9, 1.5),
-            Item("table", 1.1, 2.3),
-            *chairs_around(1.1, 2.3, 0.45, (-0.4, 0.4)),
-        ),
-        pictures=(Picture("W", 1.0, 0.6, "coffee"),),
-        openings=(Opening("N", 3.4, 1.2, "window", sill=1.05),),  # above the counter
-        lights=2,
-    )
-    sun = (4.5, 4.0)
-    sunroom = RoomSpec(
-        "sunroom",
-        (6.0, 0.0, 10.5, 4.0),
-        floor="tiles",
-        wall_color=(236, 240, 228),
-        items=(
-            wall_item("sofa", sun, "E", 2.0),
-            Item("armchair", 1.4, 1.4, 90.0),
-            Item("armchair", 1.4, 2.6, 90.0),
-            Item("coffee_table", 2.5, 2.0, 90.0),
-            Item("plant", 4.05, 0.45),
-            Item("plant", 4.05, 3.55),
-        ),
-        pictures=(Picture("S", 2.25, 1.0, "astronaut"), Picture("E", 2.0, 0.8, "art:2", z_center=1.7)),
-        openings=(Opening("S", 0.9, 0.9, "glass_door", sill=0.0),),  # to the garden
-        lights=2,
-    )
-    hall = RoomSpec(
-        "hall",
-        (6.0, 4.0, 10.5, 6.35),
-        floor="wood_dark",
-        wall_color=(240, 240, 236),
-        items=(wall_item("cabinet", (4.5, 2.35), "N", 1.5), Item("plant", 4.05, 0.45)),
-        pictures=(Picture("N", 2.6, 0.8, "hubble"),),
-        openings=(Opening("E", 1.6, 0.9, "door", sill=0.0),),  # the front door
-        lights=1,
-    )
-    stairs = RoomSpec(
-        "stairs",
-        (6.0, 6.35, 10.5, 7.5),
-        floor="wood_dark",
-        wall_color=(236, 232, 222),
-        ceiling_holes=(HOLE,),
-        lights=0,
-    )
-    return Layout(
-        "house",
-        "ground floor",
-        (living, kitchen, sunroom, hall, stairs),
-        doors=(
-            Door("kitchen", "living", width=4.0, height=CEILING_HEIGHT + 1.0),  # open side with one step
-            Door("living", "sunroom", width=GLASS_WIDTH, height=CEILING_HEIGHT + 1.0),  # glazed below
-            Door("kitchen", "hall"),
-            Door("hall", "sunroom"),
-            Door("hall", "stairs", at=1.0),
-        ),
-        ceiling_height=CEILING_HEIGHT,
-        floor_z=0.0,
-    )
-
-
-def _upper() -> Layout:
-    z = STOREY_HEIGHT
-    mb_size = (5.0, 4.5)
-    master = RoomSpec(
-        "master_bedroom",
-        (0.0, 0.0, 5.0, 4.5),
-        floor="carpet",
-        wall_color=(236, 226, 222),
-        items=(
-            wall_item("bed", mb_size, "W", 2.25),
-            wall_item("nightstand", mb_size, "W", 0.95),
-            wall_item("nightstand", mb_size, "W", 3.55),
-            wall_item("wardrobe", mb_size, "E", 1.0),
-            wall_item("wardrobe", mb_size, "E", 2.2),
-            wall_item("cabinet", mb_size, "S", 3.2),
-            Item("rug", 2.9, 2.25, 90.0),
-        ),
-        pictures=(Picture("W", 2.25, 1.0, "art:6", z_center=1.7), Picture("N", 1.5, 0.8, "ihc")),
-        openings=(Opening("S", 1.4, 1.2, "window"),),
-        lights=2,
-    )
-    bed_size = (3.0, 4.5)
-    bedroom = RoomSpec(
-        "bedroom",
-        (5.0, 0.0, 8.0, 4.5),
-        floor="wood",
-        wall_color=(228, 232, 226),
-        items=(
-            wall_item("bed", bed_size, "S", 1.5),
-            wall_item("nightstand", bed_size, "S", 0.4),
-            wall_item("nightstand", bed_size, "S", 2.6),
-            *workstation(2.58, 3.2, -90.0),
-        ),
-        pictures=(Picture("W", 2.6, 0.7, "art:4"),),
-        lights=1,
-    )
-    bath_size = (2.5, 4.5)
-    bathroom = RoomSpec(
-        "bathroom",
-        (8.0, 0.0, 10.5, 4.5),
-        floor="bath_tiles",
-        wall_color=(225, 235, 238),
-        items=(wall_item("bathtub", bath_size, "S", 1.25), wall_item("sink", bath_size, "E", 2.8)),
-        pictures=(Picture("W", 2.5, 0.4, "coins"),),
-        lights=1,
-    )
-    study_size = (3.5, 3.0)
-    study = RoomSpec(
-        "study",
-        (0.0, 4.5, 3.5, 7.5),
-        floor="carpet",
-        wall_color=(230, 232, 236),
-        items=(*workstation(1.0, 2.58, 0.0), *workstation(2.45, 2.58, 0.0), wall_item("bookshelf", study_size, "W", 1.0)),
-        pictures=(Picture("W", 2.3, 0.6, "retina"),),
-        openings=(Opening("N", 1.75, 1.2, "window"),),  # above the desks
-        lights=1,
-    )
-    land_size = (7.0, 3.0)
-    landing = RoomSpec(
-        "landing",
-        (3.5, 4.5, 10.5, 7.5),
-        floor="wood",
-        wall_color=(240, 238, 232),
-        floor_holes=(HOLE,),
-        items=(wall_item("bookshelf", land_size, "N", 0.8), Item("plant", 6.6, 1.2)),
-        pictures=(Picture("N", 1.9, 0.5, "camera"), Picture("E", 1.2, 0.7, "rocket")),
-        lights=2,
-    )
-    return Layout(
-        "house",
-        "upper floor",
-        (master, bedroom, bathroom, study, landing),
-        doors=(
-            Door("master_bedroom", "landing", width=0.9),
-            Door("bedroom", "landing"),
-            Door("bathroom", "landing", at=0.3, width=NARROW),
-            Door("study", "landing", at=0.3),
-        ),
-        ceiling_height=CEILING_HEIGHT,
-        floor_z=z,
-    )
 
 
 def house_plan() -> Building:
-    """The house's storeys (ground floor, upper floor)."""
-    return Building(
-        "house",
-        "a two-storey house (158 m^2): stair, sunken living room, glass wall to a sunroom, "
-        "bathroom behind a 0.7 m doorway, windows, a glass door and a front door",
-        (_ground(), _upper()),
-        slab_thickness=SLAB,
-    )
+    """The house's storeys (ground floor, upper floor), their rooms and doors from ``specs/house.toml``."""
+    spec, where = read_spec("house")
+    check_keys(spec, where, ("name", "description", "storeys"))
+    storeys = tuple(build_layout(s, f"{where}: storeys[{level}]", {"stair": HOLE}, name=spec["name"],
+                                 ceiling_height=CEILING_HEIGHT, floor_z=level * STOREY_HEIGHT)
+                    for level, s in enumerate(spec["storeys"]))
+    return Building(spec["name"], spec["description"], storeys, slab_thickness=SLAB)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -371,6 +199,7 @@ def build_house(seed: int = 0) -> Scene:
         _add_glazing(mb, pal, g_or, g_line, g0, g1, ground.floor_z, ground.floor_z + CEILING_HEIGHT)
     parts = mb.parts()
 
+    sunken = -next(r for r in ground.rooms if r.name == "living").floor_dz
     _, (s_or, s_line, s0, s1) = _opening(ground, "kitchen", "living")
     narrow, (n_or, n_line, n0, n1) = _opening(upper, "bathroom", "landing")
     meta = {
@@ -379,8 +208,8 @@ def build_house(seed: int = 0) -> Scene:
         "ceiling_height": CEILING_HEIGHT,
         "slab_thickness": SLAB,
         "sunken_room": "living",
-        "sunken_floor_z": -SUNKEN,
-        "sunken_opening": {"rooms": ["kitchen", "living"], "orient": s_or, "line": s_line, "span": [s0, s1], "step_height": SUNKEN},
+        "sunken_floor_z": -sunken,
+        "sunken_opening": {"rooms": ["kitchen", "living"], "orient": s_or, "line": s_line, "span": [s0, s1], "step_height": sunken},
         "glass_parts": [p.name for p in parts if p.transparent],
         "glass_wall": {"rooms": ["living", "sunroom"], "orient": g_or, "line": g_line, "span": [g0, g1],
                        "z": [round(ground.floor_z + FRAME, 6), round(ground.floor_z + CEILING_HEIGHT - FRAME, 6)],

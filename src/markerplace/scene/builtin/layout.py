@@ -17,7 +17,7 @@ import numpy as np
 from markerplace.scene.builtin.furniture import FURNITURE
 
 __all__ = ["Building", "Door", "Item", "Layout", "Opening", "OPENING_KINDS", "Picture", "RoomSpec", "chairs_around",
-           "wall_item", "workstation"]
+           "desk_cluster", "wall_item", "workstation"]
 
 
 @dataclass(frozen=True)
@@ -220,4 +220,14 @@ def chairs_around(x: float, y: float, half_depth: float, xs: tuple[float, ...]) 
     for cx in xs:
         out.append(Item("chair", x + cx, y - half_depth - 0.3, 180.0))
         out.append(Item("chair", x + cx, y + half_depth + 0.3, 0.0))
+    return tuple(out)
+
+
+def desk_cluster(x: float, y: float, xs: tuple[float, ...]) -> tuple[Item, ...]:
+    """Workstations in facing pairs about the line y: for each offset dx in ``xs``, one at
+    (x + dx, y - 0.35) facing -y and one at (x + dx, y + 0.35) facing +y."""
+    out: list[Item] = []
+    for dx in xs:
+        out += workstation(x + dx, y - 0.35, 0.0)
+        out += workstation(x + dx, y + 0.35, 180.0)
     return tuple(out)
