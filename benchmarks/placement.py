@@ -37,7 +37,8 @@ from markerplace.plan.score.localizability import (
     pose_information,
 )
 from markerplace.plan.score.marker_models import get_marker_model
-from markerplace.plan.place.greedy import MarkerCoverage, omp_greedy
+from markerplace.plan.place.greedy import omp_greedy
+from markerplace.plan.types import MarkerCoverage
 
 GOAL_SPEEDUP = 1000.0
 GOAL_LAZY_S = 5.0

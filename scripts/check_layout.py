@@ -14,7 +14,13 @@ An edge goes to the module named in the import: ``from .x import y`` reaches ``x
 ``x/y.py`` when ``y`` is a submodule); importing ``a.b.c`` also runs the ``__init__`` of ``a``
 and ``a.b``, which count as edges too.
 
-Exit status 1 when there is a top-level cycle or a module over ``--fail-lines`` (when given),
+* **cycles behind TYPE_CHECKING**: the same with the imports under ``if TYPE_CHECKING:`` added
+  (a type annotation is a dependency too; shared types live in a types module instead);
+* **package-level cycles**: at every level of the package tree, the graph between sibling
+  packages and modules (:func:`package_graphs`), with every import counted;
+* **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`.
+
+Exit status 1 when any of these is found or a module is over ``--fail-lines`` (when given),
 0 otherwise. ``tests/test_layout.py`` runs the same functions with its allow-list.
 
 Usage::
@@ -54,8 +60,9 @@ def _is_type_checking(test: ast.expr) -> bool:
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-def _imports(tree: ast.Module):
-    """(node, deferred) for every import statement; deferred = inside a function."""
+def _imports(tree: ast.Module, type_checking: bool = False):
+    """(node, deferred) for every import statement; deferred = inside a function. Imports under
+    ``if TYPE_CHECKING:`` are left out unless ``type_checking`` (then they count as deferred)."""
 
     def walk(nodes, deferred):
         for node in nodes:
@@ -64,6 +71,8 @@ def _imports(tree: ast.Module):
             elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 yield from walk(ast.iter_child_nodes(node), True)
             elif isinstance(node, ast.If) and _is_type_checking(node.test):
+                if type_checking:
+                    yield from walk(node.body, True)
                 yield from walk(node.orelse, deferred)
             else:
                 yield from walk(ast.iter_child_nodes(node), deferred)
@@ -77,16 +86,17 @@ def _with_parents(name: str, modules: dict[str, Path]) -> list[str]:
     return [m for m in (".".join(parts[:i]) for i in range(1, len(parts) + 1)) if m in modules]
 
 
-def import_graph(root: Path = ROOT, deferred: bool = False) -> dict[str, set[str]]:
+def import_graph(root: Path = ROOT, deferred: bool = False, type_checking: bool = False) -> dict[str, set[str]]:
     """Module -> modules of the package it imports (at module level; also inside functions
-    when ``deferred``). Self-edges of a package's ``__init__`` to its own parents are dropped."""
+    when ``deferred``; also under ``if TYPE_CHECKING:`` when ``type_checking``). Self-edges of a
+    package's ``__init__`` to its own parents are dropped."""
     modules = module_files(root)
     graph: dict[str, set[str]] = {m: set() for m in modules}
     for name, path in modules.items():
         is_pkg = path.name == "__init__.py"
         package = name if is_pkg else name.rpartition(".")[0]
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-        for node, inner in _imports(tree):
+        for node, inner in _imports(tree, type_checking):
             if inner and not deferred:
                 continue
             targets: list[str] = []
@@ -110,6 +120,62 @@ def import_graph(root: Path = ROOT, deferred: bool = False) -> dict[str, set[str
                 if t != name and not name.startswith(t + "."):
                     graph[name].add(t)
     return graph
+
+
+def package_graphs(graph: dict[str, set[str]]) -> dict[str, dict[str, set[str]]]:
+    """Per package P: the graph between P's direct children (subpackages and modules). An import
+    of a module in child A's subtree from child B's subtree is the edge B -> A; imports of P's
+    own ``__init__`` and of anything outside P do not count at P's level. A cycle at any level
+    is a package-level cycle (e.g. ``plan`` -> ``report`` -> ``plan`` at the top level)."""
+    out: dict[str, dict[str, set[str]]] = {}
+    for a, targets in graph.items():
+        for b in targets:
+            pa, pb = a.split("."), b.split(".")
+            common = 0
+            while common < min(len(pa), len(pb)) and pa[common] == pb[common]:
+                common += 1
+            if common == len(pa) or common == len(pb):
+                continue  # one is the other's package (its __init__): not an edge between siblings
+            parent = ".".join(pa[:common])
+            level = out.setdefault(parent, {})
+            ca, cb = ".".join(pa[:common + 1]), ".".join(pb[:common + 1])
+            level.setdefault(ca, set()).add(cb)
+            level.setdefault(cb, set())
+    return out
+
+
+def package_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Cycles between sibling packages/modules at every level of the package tree."""
+    found = []
+    for level in package_graphs(graph).values():
+        found += cycles(level)
+    return sorted(found, key=lambda c: (-len(c), c))
+
+
+HEAVY_OPTIONAL = ("open3d", "moderngl", "dask", "distributed", "matplotlib", "reportlab", "skimage", "pupil_apriltags",
+                  "trimesh", "scipy", "cv2", "PIL", "faiss", "numba", "gtsam", "msgpack", "psutil", "tqdm",
+                  "ifcopenshell", "robotpy_apriltag")
+"""Third-party modules that may be imported inside a function: heavy to load (a GL context,
+OpenMP runtimes, a plotting stack, compiled kernels) or needed by few commands, so that
+``markerplace --help`` and a one-line argument error stay fast. Everything else, and every
+module of markerplace itself, is imported at module level."""
+
+
+def deferred_imports(root: Path = ROOT) -> list[tuple[str, int, str]]:
+    """(module, line, imported module) of every import inside a function that is not of a
+    :data:`HEAVY_OPTIONAL` module."""
+    out = []
+    for name, path in module_files(root).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node, inner in _imports(tree):
+            if not inner:
+                continue
+            mods = [a.name for a in node.names] if isinstance(node, ast.Import) else [
+                ("." * node.level) + (node.module or "")]
+            for mod in mods:
+                if mod.split(".")[0] not in HEAVY_OPTIONAL:
+                    out.append((name, node.lineno, mod))
+    return sorted(out)
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -200,6 +266,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"import cycles through imports inside functions: {len(full_cycles)}")
     for comp in full_cycles:
         print("  " + " -> ".join(cycle_path(full, comp)) + (f"  ({len(comp)} modules)" if len(comp) > 2 else ""))
+    full_tc = import_graph(args.root, deferred=True, type_checking=True)
+    tc_cycles = [c for c in cycles(full_tc) if c not in full_cycles]
+    print(f"import cycles behind TYPE_CHECKING: {len(tc_cycles)}")
+    for comp in tc_cycles:
+        print("  " + " -> ".join(cycle_path(full_tc, comp)))
+    pkg_cycles = package_cycles(full_tc)
+    print(f"package-level cycles: {len(pkg_cycles)}")
+    for comp in pkg_cycles:
+        print("  " + " <-> ".join(comp))
+    inner = deferred_imports(args.root)
+    print(f"imports inside functions (other than {len(HEAVY_OPTIONAL)} heavy optional modules): {len(inner)}")
+    for name, line, mod in inner[:40]:
+        print(f"  {name}:{line}: {mod}")
+    if full_cycles or tc_cycles or pkg_cycles or inner:
+        status = 1
     if args.fail_lines is not None and any(n > args.fail_lines for n, _ in big):
         status = 1
     return status

@@ -3,7 +3,7 @@
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.runtime import environment as env
+from markerplace.testbed import environment as env
 
 
 def test_environment_names_versions_and_renderer():

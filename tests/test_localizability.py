@@ -99,7 +99,7 @@ def test_pose_information_batching_and_order_invariance() -> None:
 
 def test_compiled_kernel_matches_numpy_whitening() -> None:
     """The compiled per-pose sum equals the numpy whitened-Jacobian Gram (two implementations)."""
-    from markerplace.plan.score.localizability import _gram, _whitened_jacobians
+    from markerplace.plan.score.localizability import gram, whitened_jacobians
 
     rng = np.random.default_rng(5)
     T, pts, idx = _scene(rng, n_poses=12, per_pose=80)
@@ -113,7 +113,7 @@ def test_compiled_kernel_matches_numpy_whitening() -> None:
         x, y, z = p_c.T[:, None]
         valid = (z > 1e-6) & (np.sum(p_c**2, 1)[None] <= noise.max_range**2)
         var = noise.landmark_sigma**2 * (1.0 + ns[sel][None])
-        ref = _gram(_whitened_jacobians(x, y, z, var, valid, K2, noise.pixel_sigma))[0]
+        ref = gram(whitened_jacobians(x, y, z, var, valid, K2, noise.pixel_sigma))[0]
         np.testing.assert_allclose(Lam[n], ref, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(ref).max()))
     assert np.any(np.sum((pts - T[idx, :3, 3]) ** 2, 1) > noise.max_range**2)  # range cut exercised
     # a non-finite point is dropped, not spread as NaN over its pose

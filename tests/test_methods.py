@@ -26,7 +26,8 @@ from markerplace.plan.place.methods import (
     method_from_config,
 )
 from markerplace.plan.place.baselines import random_placement, uniform_placement
-from markerplace.plan.place.greedy import MarkerCoverage, apply_coverages, omp_greedy
+from markerplace.plan.place.greedy import apply_coverages, omp_greedy
+from markerplace.plan.types import MarkerCoverage
 from markerplace.testbed import marker_sets as placements
 from markerplace.testbed import config as tbconfig
 

@@ -7,15 +7,8 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.plan.score.localizability import information_gain
-from markerplace.plan.place.greedy import (
-    MarkerCoverage,
-    _Problem,
-    coverage_percentages,
-    inverted_cdf_rank,
-    omp_greedy,
-    percentile_with_zeros,
-    q_from_v,
-)
+from markerplace.plan.place.greedy import GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy, percentile_with_zeros, q_from_v
+from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 
 
@@ -99,7 +92,7 @@ def test_batched_evaluation_equals_naive_percentile() -> None:
     rng = np.random.default_rng(4)
     base, covs = random_problem(rng, 150, 20, max_cov=149)
     for q in [0.0, 37.0, 90.0, 99.5, 100.0]:
-        prob = _Problem(base.copy(), covs, q)
+        prob = GreedyProblem(base.copy(), covs, q)
         qg, mg = prob.evaluate(np.arange(len(covs)))
         for m, cov in enumerate(covs):
             full = np.zeros(150)

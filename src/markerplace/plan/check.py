@@ -38,7 +38,8 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.greedy import MarkerCoverage, apply_coverages
+from markerplace.plan.place.greedy import apply_coverages
+from markerplace.plan.types import MarkerCoverage
 
 log = logging.getLogger(__name__)
 

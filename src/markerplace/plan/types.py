@@ -1,5 +1,6 @@
-"""What the plan stages hand each other: :class:`PlanData` (scored poses and candidates, the
-input of every placement method) and :class:`Placement` (the chosen tags).
+"""What the plan stages hand each other: :class:`MarkerCoverage` (what one tag adds where it is
+seen), :class:`PlanData` (scored poses and candidates, the input of every placement method) and
+:class:`Placement` (the chosen tags).
 
 Kept apart from the stages so that placement methods, the testbed and the reports can name
 these types without importing the stages that make them.
@@ -13,7 +14,49 @@ import numpy as np
 
 from markerplace.plan.discretize.artifact import Discretization
 
-__all__ = ["PlanData", "Placement"]
+__all__ = ["MarkerCoverage", "PlanData", "Placement"]
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerCoverage:
+    """Poses that see one candidate marker and the information the marker adds there.
+
+    Attributes:
+        pose_idx: (n_m,) int, distinct indices into the feasible poses.
+        info: (n_m, 6, 6) symmetric PSD information ``M`` per seeing pose, camera tangent
+            space (omega, nu), 1/rad^2 and 1/m^2.
+
+    Memory is ``n_m * 296`` bytes: 500 candidates seen by 500 poses each take 74 MB.
+    """
+
+    pose_idx: np.ndarray
+    info: np.ndarray
+
+    def __post_init__(self) -> None:
+        idx = np.asarray(self.pose_idx, dtype=np.int64).reshape(-1)
+        info = np.asarray(self.info, dtype=float).reshape(-1, 6, 6)
+        if idx.shape[0] != info.shape[0]:
+            raise ValueError("MarkerCoverage: pose_idx and info lengths differ")
+        if np.unique(idx).shape[0] != idx.shape[0]:
+            raise ValueError("MarkerCoverage: pose_idx must be distinct")
+        object.__setattr__(self, "pose_idx", idx)
+        object.__setattr__(self, "info", info)
+
+    def __len__(self) -> int:
+        return int(self.pose_idx.shape[0])
+
+    @classmethod
+    def from_dense(cls, info: np.ndarray, visible: np.ndarray | None = None) -> "MarkerCoverage":
+        """From per-pose information (N, 6, 6) and an optional (N,) visibility mask.
+
+        Poses that are not visible or whose information is exactly zero are dropped.
+        """
+        info = np.asarray(info, dtype=float)
+        keep = np.any(info != 0.0, axis=(1, 2))
+        if visible is not None:
+            keep &= np.asarray(visible, dtype=bool)
+        idx = np.flatnonzero(keep)
+        return cls(idx, info[idx])
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,7 +12,7 @@ The greedy adds, each round, the candidate with the largest marginal gain
     I(m, p | S) = 1/2 [ln det(Lambda_p + M_pm) - ln det Lambda_p]   (nats),
 
 evaluated for every remaining candidate in one batched pass over the flattened coverages
-(:class:`markerplace.plan.place.greedy._Problem`: cached whitening per pose,
+(:class:`markerplace.plan.place.greedy.GreedyProblem`: cached whitening per pose,
 :func:`~markerplace.plan.score.localizability.information_gain_whitened`).
 
 F is monotone (more information never lowers a score, P is increasing) but not submodular in
@@ -29,7 +29,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.greedy import MarkerCoverage, PlacementResult, check_k, _Problem
+from markerplace.plan.place.greedy import GreedyProblem, PlacementResult, check_k
+from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.score.success_model import SuccessModel
 
 log = logging.getLogger(__name__)
@@ -48,8 +49,8 @@ def expected_localized(info: np.ndarray, model: SuccessModel) -> float:
     return float(np.sum(model.probability(-entropy(info))))
 
 
-class _RecallProblem(_Problem):
-    """:class:`_Problem` plus the current score of every pose and expected-pose gains."""
+class _RecallProblem(GreedyProblem):
+    """:class:`GreedyProblem` plus the current score of every pose and expected-pose gains."""
 
     def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage],
                  model: SuccessModel):

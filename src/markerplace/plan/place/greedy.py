@@ -44,50 +44,9 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.plan.score.localizability import information_gain_whitened, whitening
+from markerplace.plan.types import MarkerCoverage
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True, eq=False)
-class MarkerCoverage:
-    """Poses that see one candidate marker and the information the marker adds there.
-
-    Attributes:
-        pose_idx: (n_m,) int, distinct indices into the feasible poses.
-        info: (n_m, 6, 6) symmetric PSD information ``M`` per seeing pose, camera tangent
-            space (omega, nu), 1/rad^2 and 1/m^2.
-
-    Memory is ``n_m * 296`` bytes: 500 candidates seen by 500 poses each take 74 MB.
-    """
-
-    pose_idx: np.ndarray
-    info: np.ndarray
-
-    def __post_init__(self) -> None:
-        idx = np.asarray(self.pose_idx, dtype=np.int64).reshape(-1)
-        info = np.asarray(self.info, dtype=float).reshape(-1, 6, 6)
-        if idx.shape[0] != info.shape[0]:
-            raise ValueError("MarkerCoverage: pose_idx and info lengths differ")
-        if np.unique(idx).shape[0] != idx.shape[0]:
-            raise ValueError("MarkerCoverage: pose_idx must be distinct")
-        object.__setattr__(self, "pose_idx", idx)
-        object.__setattr__(self, "info", info)
-
-    def __len__(self) -> int:
-        return int(self.pose_idx.shape[0])
-
-    @classmethod
-    def from_dense(cls, info: np.ndarray, visible: np.ndarray | None = None) -> "MarkerCoverage":
-        """From per-pose information (N, 6, 6) and an optional (N,) visibility mask.
-
-        Poses that are not visible or whose information is exactly zero are dropped.
-        """
-        info = np.asarray(info, dtype=float)
-        keep = np.any(info != 0.0, axis=(1, 2))
-        if visible is not None:
-            keep &= np.asarray(visible, dtype=bool)
-        idx = np.flatnonzero(keep)
-        return cls(idx, info[idx])
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,7 +153,7 @@ def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
 # --------------------------------------------------------------------------------------------
 
 
-class _Problem:
+class GreedyProblem:
     """Flattened coverages for batched gain evaluation."""
 
     def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float):
@@ -296,7 +255,7 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     for ex in existing or ():
         lam[ex.pose_idx] += ex.info
     q, eligible = q_from_v(coverage_percentages(coverages, N), v)
-    prob = _Problem(lam, coverages, q)
+    prob = GreedyProblem(lam, coverages, q)
     log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",
               N, C, k, v, q, int(eligible.sum()), lazy)
 
@@ -358,6 +317,6 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
 
 
 __all__ = [
-    "MarkerCoverage", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
+    "GreedyProblem", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
     "omp_greedy", "percentile_with_zeros", "q_from_v",
 ]

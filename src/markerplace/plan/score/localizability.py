@@ -27,7 +27,7 @@ classic interaction matrix. Each landmark's term is whitened (``A = L^-1 J`` wit
 The per-pose sums ``sum A^T A`` over natural landmarks run in a compiled kernel
 (:mod:`markerplace.plan.score.landmark_kernel`, one pass per pose, poses spread over threads); the few
 marker terms (the ``corners`` marker model) use the same whitening in numpy
-(:func:`_whitened_jacobians`).
+(:func:`whitened_jacobians`).
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ class NoiseConfig:
 # Natural-feature information
 # --------------------------------------------------------------------------------------------
 
-def _whitened_jacobians(x: np.ndarray, y: np.ndarray, z: np.ndarray, var_p: np.ndarray | float,
+def whitened_jacobians(x: np.ndarray, y: np.ndarray, z: np.ndarray, var_p: np.ndarray | float,
                         valid: np.ndarray, K: np.ndarray, pixel_sigma: float) -> np.ndarray:
     """Whitened, transposed Jacobians ``A^T`` of landmarks with landmark noise marginalized.
 
@@ -154,7 +154,7 @@ def _whitened_jacobians(x: np.ndarray, y: np.ndarray, z: np.ndarray, var_p: np.n
     return G.reshape(B, 6, 2 * m)
 
 
-def _gram(G: np.ndarray) -> np.ndarray:
+def gram(G: np.ndarray) -> np.ndarray:
     """(B, 6, k) -> (B, 6, 6) ``G @ G^T``."""
     return np.matmul(G, np.swapaxes(G, 1, 2))
 
@@ -341,5 +341,5 @@ def marker_visibility(world_from_cam: np.ndarray, world_from_marker: np.ndarray,
 
 __all__ = [
     "ENTROPY_CONST", "NoiseConfig", "entropy", "information_gain", "logdet_spd", "marker_visibility",
-    "pose_information", "score", "information_gain_whitened", "whitening",
+    "pose_information", "score", "information_gain_whitened", "whitening", "gram", "whitened_jacobians",
 ]

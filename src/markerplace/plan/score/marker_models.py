@@ -31,7 +31,7 @@ import numpy as np
 
 from markerplace.geometry import invert, marker_corners_local
 from markerplace.registry import Registry, configure
-from markerplace.plan.score.localizability import NoiseConfig, _gram, _whitened_jacobians
+from markerplace.plan.score.localizability import NoiseConfig, gram, whitened_jacobians
 
 log = logging.getLogger(__name__)
 
@@ -200,8 +200,8 @@ class CornersModel(MarkerModel):
         edges = np.linalg.norm(uv - np.roll(uv, -1, axis=1), axis=-1)  # (N, 4)
         ok = np.all(front & inside, axis=1) & (edges.min(axis=1) >= self.conf.min_side_px)
         valid = np.broadcast_to(ok[:, None], (N, 4))
-        G = _whitened_jacobians(p_c[..., 0], p_c[..., 1], z, 0.0, valid, K, self.noise.pixel_sigma)
-        return _gram(G)
+        G = whitened_jacobians(p_c[..., 0], p_c[..., 1], z, 0.0, valid, K, self.noise.pixel_sigma)
+        return gram(G)
 
 
 __all__ = ["MARKER_MODELS", "MIN_SIDE_PX", "CornersModel", "MarkerModel", "PaperModel", "get_marker_model"]

@@ -1,6 +1,6 @@
 """The score stage: each camera pose's information from its SIFT points (look-alikes
 down-weighted), its localizability score, and what every candidate tag would add where it is
-seen (:class:`~markerplace.plan.place.greedy.MarkerCoverage`).
+seen (:class:`~markerplace.plan.types.MarkerCoverage`).
 
 Frames: poses are world_from_cam (N, 4, 4), marker poses world_from_marker (M, 4, 4), metres.
 The marker list is the candidates first, then the existing markers.
@@ -17,10 +17,9 @@ import numpy as np
 
 from markerplace.imaging.features import FeatureSet
 from markerplace.plan.discretize.artifact import Discretization
-from markerplace.plan.place.greedy import MarkerCoverage
 from markerplace.plan.score.localizability import NoiseConfig, entropy, marker_visibility, pose_information
 from markerplace.plan.score.marker_models import get_marker_model
-from markerplace.plan.types import PlanData
+from markerplace.plan.types import MarkerCoverage, PlanData
 from markerplace.geometry import Intrinsics
 
 log = logging.getLogger(__name__)

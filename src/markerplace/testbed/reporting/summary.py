@@ -82,7 +82,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     curves = recall_curves(rows, scene_name, ts0, main, ks)
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
-    from markerplace.runtime.environment import environment
+    from markerplace.testbed.environment import environment
 
     write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config),
                                      "environment": environment()})
