@@ -7,7 +7,7 @@ Prints ``name: value`` lines. For each input, three implementations count n_p (c
   50k points, else the PCA-64 ``IndexIVFFlat`` search);
 * ``ref``: the hand-written PCA + inverted file it replaced, kept in
   ``benchmarks/similarity_reference.py`` (``auto``: exact blocks up to 30k points, else approx);
-* ``exact``: the exact FAISS path (equal to float64 brute force, see tests/test_similarity.py)
+* ``exact``: the exact FAISS path (equal to float64 brute force, see tests/plan/similarity/test_stage.py)
   on ``--sample`` random query points against ALL points: brute force over all P^2 pairs is too
   slow at these sizes, so recall is measured on these queries (printed as ``recall_basis``).
 

@@ -10,7 +10,7 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
 * ``interrupted``: the command is started in its own process group, and once its log shows the
   stage, SIGINT (or SIGTERM) goes to the whole group as a terminal's Ctrl-C does: exit 130 (143)
   within 5 s, one line saying how to resume, no traceback, no process of the group left
-  (``tests/interrupts.py``).
+  (``tests/helpers/interrupts.py``).
 
 Any traceback, any other exit code, a missing message, a run over its time limit or a failed
 output check is reported. Prints one line per case and a summary; writes ``hostile_inputs.md``
@@ -42,8 +42,8 @@ from typing import Callable
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from interrupts import interrupt_cli  # noqa: E402  (tests/ helpers: process-group signals, servers)
-from loopback import LoopbackServer  # noqa: E402
+from helpers.interrupts import interrupt_cli  # noqa: E402  (tests/helpers: process-group signals, servers)
+from helpers.loopback import LoopbackServer  # noqa: E402
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 FAR = np.array([1.0e6, 2.0e6, 0.0])

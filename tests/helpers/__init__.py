@@ -1,0 +1,29 @@
+"""Helpers shared by the tests (importable as ``helpers`` from every test folder: ``pythonpath``
+in pyproject.toml puts ``tests/`` on the path), and the places the tests read from.
+
+The modules: :mod:`helpers.consumers` (the robots' tag-map readers), :mod:`helpers.hostile_meshes`
+(the hostile mesh corpus), :mod:`helpers.interrupts` (process-group SIGINT), :mod:`helpers.loopback`
+(silent and garbage servers on 127.0.0.1), :mod:`helpers.official_tags` (the official tag36h11
+images) and :mod:`helpers.printed_tags` (tags.pdf rasterized).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+"""The repository root (README.md, docs/, scripts/, benchmarks/, src/)."""
+
+SRC = REPO / "src"
+"""The package's source folder (``PYTHONPATH`` of the commands the tests start)."""
+
+TESTS = REPO / "tests"
+
+DATA = TESTS / "data"
+"""The tests' data files (``apriltag_imgs``)."""
+
+FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
+"""Options of a quick ``plan``/``evaluate`` on ``tiny`` in this process: a 1 m lattice, 4 yaws."""
+
+FAST_2_YAWS = ["--grid-spacing", "1.0", "--yaws", "2", "--workers", "1", "--quiet"]
+""":data:`FAST` with 2 yaws: quicker still, for tests that look at the outputs, not the scores."""
