@@ -50,6 +50,41 @@ def test_no_import_cycle_through_imports_inside_functions(layout):
         " -> ".join(layout.cycle_path(graph, c)) for c in found)
 
 
+def test_no_import_cycle_behind_type_checking(layout):
+    """A type annotation is a dependency too: shared types live in a types module (plan/types.py)."""
+    graph = layout.import_graph(deferred=True, type_checking=True)
+    found = layout.cycles(graph)
+    assert not found, "import cycles (TYPE_CHECKING imports counted): " + "; ".join(
+        " -> ".join(layout.cycle_path(graph, c)) for c in found)
+
+
+def test_no_package_level_cycle(layout):
+    """At every level of the package tree (top-level packages, the stage packages of plan, ...)
+    the imports between siblings form no cycle, every import counted."""
+    found = layout.package_cycles(layout.import_graph(deferred=True, type_checking=True))
+    assert not found, "package-level cycles: " + "; ".join(" <-> ".join(c) for c in found)
+
+
+def test_the_checker_finds_package_and_type_checking_cycles(tmp_path, layout):
+    pkg = tmp_path / "markerplace"
+    for sub in ("plan", "report"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "plan" / "stage.py").write_text("from markerplace.report.page import write\n")
+    (pkg / "report" / "page.py").write_text("def write():\n    pass\n")
+    (pkg / "report" / "types_user.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                                                  "    from markerplace.plan.types import PlanData\n")
+    (pkg / "plan" / "types.py").write_text("from markerplace.report.types_user import x\n")
+    graph = layout.import_graph(pkg, deferred=True, type_checking=True)
+    assert layout.cycles(layout.import_graph(pkg, deferred=True)) == []  # no module cycle without TYPE_CHECKING
+    assert layout.cycles(graph) == [["markerplace.plan.types", "markerplace.report.types_user"]]
+    assert layout.package_cycles(graph) == [["markerplace.plan", "markerplace.report"]]
+    (pkg / "report" / "types_user.py").write_text("x = 1\n")
+    graph = layout.import_graph(pkg, deferred=True, type_checking=True)
+    assert layout.cycles(graph) == [] and layout.package_cycles(graph) == []  # plan -> report only
+
+
 def test_no_module_over_the_limit(layout):
     sizes = layout.line_counts()
     over = {m: n for m, n in sizes.items() if n > MAX_LINES and m not in ALLOWED_OVER}
@@ -86,8 +121,9 @@ def test_the_checker_finds_a_cycle_and_a_big_module(tmp_path, layout):
         ["markerplace.a", "markerplace.c", "markerplace.sub.b"]]
     assert layout.line_counts(pkg)["markerplace.c"] > 500
     out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)
-    assert out.returncode == 0, out.stderr
+    assert out.returncode == 1, out.stderr  # a cycle through a deferred import is a cycle too
     assert "markerplace/c.py" in out.stdout and "cycles through imports inside functions: 1" in out.stdout
+    assert "imports inside functions (other than" in out.stdout and "markerplace.c:5: .a" in out.stdout
     (pkg / "d.py").write_text("from .a import y\n")
     (pkg / "a.py").write_text("from .d import z\n")
     out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)

@@ -6,7 +6,7 @@ BSD 2-Clause; the file names its source). They are drawn the way the AprilTag li
 ``apriltag_to_image`` draws them, which is also how the official images of
 AprilRobotics/apriltag-imgs were made: bit ``i`` of a code (most significant first) is white at
 column ``bit_x[i]``, row ``bit_y[i]`` of the 8 x 8 black square, row 0 being the tag's top edge
-as printed. ``tests/test_render_tags.py`` compares every id cell by cell with the AprilTag C
+as printed. ``tests/render/test_tags.py`` compares every id cell by cell with the AprilTag C
 library's own ``apriltag_to_image`` (the one pupil-apriltags ships), so the table cannot drift
 from the family the detectors decode.
 

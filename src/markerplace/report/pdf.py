@@ -35,7 +35,7 @@ from typing import Sequence
 
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.tagfamily import outer_size
-from markerplace.report.printable import caption_for, tag_modules
+from markerplace.report.printable import black_runs, caption_for, tag_modules
 from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, TileLayout, caption_block_mm, check_paper, sheet_advice, sheet_plan
 
 log = logging.getLogger(__name__)
@@ -88,18 +88,9 @@ class _Pdf:
         px, py = self.xy(x0, y0 + edge)
         c.rect(px, py, edge * PT_PER_MM, edge * PT_PER_MM, stroke=0, fill=1)
         path = c.beginPath()
-        for r in range(n):
-            col = 0
-            while col < n:
-                if bits[r, col]:
-                    end = col
-                    while end < n and bits[r, end]:
-                        end += 1
-                    px, py = self.xy(x0 + col * cell, y0 + (r + 1) * cell)
-                    path.rect(px, py, (end - col) * cell * PT_PER_MM, cell * PT_PER_MM)
-                    col = end
-                else:
-                    col += 1
+        for r, col, end in black_runs(bits):
+            px, py = self.xy(x0 + col * cell, y0 + (r + 1) * cell)
+            path.rect(px, py, (end - col) * cell * PT_PER_MM, cell * PT_PER_MM)
         c.setFillColorRGB(0, 0, 0)
         c.drawPath(path, stroke=0, fill=1)
         c.restoreState()

@@ -29,6 +29,25 @@ def tag_modules(tag_id: int) -> np.ndarray:
     return tag_image(tag_id, pixels_per_bit=1) < 128
 
 
+def black_runs(modules: np.ndarray) -> list[tuple[int, int, int]]:
+    """Horizontal runs of black modules, one rectangle each when drawn: (row, first column, end
+    column (exclusive)) for every run in the (n, n) bool ``modules`` (True = black), row by row."""
+    runs = []
+    n = modules.shape[1]
+    for r in range(modules.shape[0]):
+        c = 0
+        while c < n:
+            if modules[r, c]:
+                end = c
+                while end < n and modules[r, end]:
+                    end += 1
+                runs.append((r, c, end))
+                c = end
+            else:
+                c += 1
+    return runs
+
+
 def tag_svg(tag_id: int, size_m: float, caption: Sequence[str]) -> str:
     """SVG document of one tag at physical size.
 
@@ -51,19 +70,8 @@ def tag_svg(tag_id: int, size_m: float, caption: Sequence[str]) -> str:
     strip = line_mm * (len(lines) + 0.5)
     # about 0.55 em per glyph in a sans-serif font: keep the longest line inside the width
     font = min(0.75 * line_mm, 0.95 * edge_mm / (0.55 * max(1, max(len(t) for t in lines))))
-    rects = []
-    for r in range(bits):
-        c = 0
-        while c < bits:
-            if modules[r, c]:
-                c1 = c
-                while c1 < bits and modules[r, c1]:
-                    c1 += 1
-                rects.append(f'<rect x="{c * cell:.4f}" y="{r * cell:.4f}" width="{(c1 - c) * cell:.4f}" '
-                             f'height="{cell:.4f}"/>')
-                c = c1
-            else:
-                c += 1
+    rects = [f'<rect x="{c * cell:.4f}" y="{r * cell:.4f}" width="{(c1 - c) * cell:.4f}" height="{cell:.4f}"/>'
+             for r, c, c1 in black_runs(modules)]
     height = edge_mm + strip
     texts = [f'<text x="{edge_mm / 2:.4f}" y="{edge_mm + (i + 1) * line_mm:.4f}" xml:space="preserve" '
              f'font-family="sans-serif" font-size="{font:.3f}" text-anchor="middle" fill="black">'

@@ -9,7 +9,7 @@ placement can change: its view holds none of the markers (so its features and ta
 marker-free ones), the map images its VLAD retrieval returns against this placement's map are
 the ones it returns against the marker-free map, in the same order, and none of them was
 re-rendered. The localizer then sees identical inputs (and seeds RANSAC per query), so the
-result is identical: this skips work, it approximates nothing (``tests/test_testbed.py``
+result is identical: this skips work, it approximates nothing (``tests/pipelines/test_evaluate.py``
 compares both paths).
 """
 

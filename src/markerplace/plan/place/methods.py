@@ -6,10 +6,12 @@
 * ``random``: :class:`RandomPlacement`, a seeded uniform sample of the candidates;
 * ``uniform``: :class:`UniformPlacement`, evenly spaced along the free-space perimeter (seeded offset);
 * ``human``: :class:`HumanPlacement`, the paper's human baseline (centres of the least-textured
-  wall stretches, spread over rooms; :mod:`markerplace.plan.place.human`).
+  wall stretches, spread over rooms; :mod:`markerplace.plan.place.human`);
+* ``expected-recall``: :class:`ExpectedRecall`, greedy on the expected number of poses that
+  localize under a success model fitted on the map images (:mod:`markerplace.plan.place.expected_recall`).
 
 A method works on the planner's :class:`~markerplace.plan.types.PlanData` (base information
-per pose, one :class:`~markerplace.plan.place.greedy.MarkerCoverage` per candidate, then one per
+per pose, one :class:`~markerplace.plan.types.MarkerCoverage` per candidate, then one per
 existing marker) and returns a :class:`Choice`; :func:`markerplace.plan.place.stage.place` turns it
 into markers with tag ids. ``evaluate`` reads each method's class attributes: a ``randomized``
 method is placed ``--runs`` times (seeds ``--placement-seed + run``) and is a baseline of the
@@ -20,7 +22,7 @@ Adding a method: write a :class:`PlacementMethod` subclass in this file (``name`
 ``label``, ``randomized``, ``nested``, a frozen ``Config`` with ``default_conf = Config()`` and
 :meth:`PlacementMethod.place`), decorated with ``@PLACEMENT_METHODS.register``; ``plan
 --method``, ``evaluate --methods``, validation and the report tables list it from the registry.
-Its test goes next to ``tests/test_methods.py``.
+Its test goes next to ``tests/plan/place/test_methods.py``.
 """
 
 from __future__ import annotations
@@ -195,7 +197,7 @@ class OMP(PlacementMethod):
 
 @PLACEMENT_METHODS.register
 class RandomPlacement(PlacementMethod):
-    """k distinct candidates drawn uniformly (:func:`~markerplace.plan.place.greedy.random_placement`,
+    """k distinct candidates drawn uniformly (:func:`~markerplace.plan.place.baselines.random_placement`,
     ``numpy.random.default_rng(seed)``)."""
 
     name = "random"
@@ -217,7 +219,7 @@ class RandomPlacement(PlacementMethod):
 @PLACEMENT_METHODS.register
 class UniformPlacement(PlacementMethod):
     """k candidates evenly spaced along the free-space perimeter with a seeded offset
-    (:func:`~markerplace.plan.place.greedy.uniform_placement`, the paper's 'uniform')."""
+    (:func:`~markerplace.plan.place.baselines.uniform_placement`, the paper's 'uniform')."""
 
     name = "uniform"
     summary = "evenly spaced along the free-space perimeter"

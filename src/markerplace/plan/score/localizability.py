@@ -11,7 +11,7 @@ Conventions
   *right* perturbation ``T' = T Exp(xi)``: exactly GTSAM's ``Pose3`` convention. Hence the 6x6
   information matrix ``Lambda`` returned here is the inverse of
   ``gtsam.Marginals(graph, values).marginalCovariance(camera_key)`` for the paper's graph
-  (tested in ``tests/test_localizability_gtsam.py``).
+  (tested in ``tests/plan/score/test_localizability_gtsam.py``).
 * Information matrices are in units of 1/rad^2 (omega block) and 1/m^2 (nu block).
 
 Per landmark ``p`` (world) seen from pose ``T = (R, t)``, with ``p_c = R^T (p - t)`` and the

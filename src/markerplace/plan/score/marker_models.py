@@ -16,7 +16,7 @@ Adding a model: write a :class:`MarkerModel` subclass in this file with ``name``
 a frozen ``Config`` (its own settings, documented defaults), ``default_conf = Config()`` and
 :meth:`MarkerModel.information`, decorated with ``@MARKER_MODELS.register``. The CLI choices,
 help and validation pick it up from the registry; its test goes next to
-``tests/test_marker_models.py``. Noise shared by every model (pixel sigma, the paper model's
+``tests/plan/score/test_marker_models.py``. Noise shared by every model (pixel sigma, the paper model's
 relative-pose and prior sigmas) stays in :class:`~markerplace.plan.score.localizability.NoiseConfig`,
 the one home of the synthetic problem's noise (docs/design.md section 3).
 """
@@ -108,7 +108,7 @@ class PaperModel(MarkerModel):
     with ``sigma_rel = noise.marker_rel_sigma`` and ``sigma_prior = noise.marker_prior_sigma``
     on all 6 components. Its noise does not depend on distance, tag size or K: ``ln det M`` is
     the same at every distance (``det A = 1``), only the direction of the information changes.
-    Tested against GTSAM's marginal covariance in ``tests/test_localizability_gtsam.py``.
+    Tested against GTSAM's marginal covariance in ``tests/plan/score/test_localizability_gtsam.py``.
     """
 
     name = "paper"
