@@ -26,7 +26,7 @@ import pytest
 from helpers import consumers as C
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
-from markerplace.report.tagmaps import write_tag_maps
+from markerplace.report.tagmaps.write import write_tag_maps
 from markerplace.scene.loader import up_rotation
 from helpers.official_tags import official_square
 

@@ -12,7 +12,8 @@ import yaml
 
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
-from markerplace.report.tagmaps import MARKER_FROM_WPILIB, write_tag_maps
+from markerplace.report.tagmaps.wpilib import MARKER_FROM_WPILIB
+from markerplace.report.tagmaps.write import write_tag_maps
 from markerplace.scene.loader import up_rotation
 
 

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.report.pdf import write_tags_pdf
-from markerplace.report.tagmaps import write_tag_maps
+from markerplace.report.tagmaps.write import write_tag_maps
 
 __all__ = ["write_deliverables", "write_known_tag_maps", "field_extent"]
 
