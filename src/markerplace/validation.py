@@ -84,28 +84,9 @@ OCCUPANCY_CELL = 0.05
 
 UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
 SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
-PLACEMENT_SEED = Bound("--placement-seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
-TEST_SEED = Bound("--test-seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 3", integer=True)
-K = Bound("-k", 1, 10_000, "", "the number of markers to place, e.g. 20", integer=True)
-V = Bound("-v", 0.0, 100.0, "%", "a percentage such as 90")
-TAG_SIZE = Bound("--tag-size", 0.02, 3.0, "m", "the black-square edge in metres, e.g. 0.4")
-PLANE_HEIGHT = Bound("--height", 0.1, 10.0, "m", "the eye-level plane height above the floor in metres, e.g. 1.5")
-LEVEL = Bound("--level", 0, 1000, "", "a storey index, 0 = lowest", integer=True)
-GRID_SPACING = Bound("--grid-spacing", OCCUPANCY_CELL, 50.0, "m",
-                     f"the camera grid spacing in metres, e.g. 0.5 (not finer than the {OCCUPANCY_CELL:g} m occupancy grid)")
-CLEARANCE = Bound("--clearance", 0.0, 5.0, "m", "the distance of cameras from obstacles in metres, e.g. 0.3")
-YAWS = Bound("--yaws", 1, 360, "", "camera yaws per location, e.g. 8", integer=True)
-MARKER_SPACING = Bound("--marker-spacing", OCCUPANCY_CELL, 100.0, "m",
-                       f"the spacing of candidate markers in metres, e.g. 1.0 (not finer than {OCCUPANCY_CELL:g} m)")
-WORKERS = Bound("--workers", 0, 256, "", "0 (automatic) or a number of processes, e.g. 2", integer=True)
 IMAGE_WIDTH = Bound("--width", 16, 4096, "px", "an image width in pixels, e.g. 600", integer=True)
 IMAGE_HEIGHT = Bound("--height", 16, 4096, "px", "an image height in pixels, e.g. 450", integer=True)
 HFOV = Bound("--hfov", 1.0, 170.0, "deg", "a horizontal field of view in degrees, e.g. 90")
-TESTS = Bound("--tests", 1, 100_000, "", "test images per test set, e.g. 200", integer=True)
-RUNS = Bound("--runs", 1, 1000, "", "placements per random/uniform baseline, e.g. 5", integer=True)
-EVAL_K = Bound("--k", 1, 10_000, "", "positive marker counts, e.g. 5,10,15,20", integer=True)
-TAG_SCALE = Bound("--tag-scale", 0.1, 5.0, "", "a factor in [0.1, 5], e.g. 1.25")
-SHIFT = Bound("--shift", 0.0, 5.0, "m", "a distance in [0, 5] metres, e.g. 0.1")
 COORDINATE = Bound("coordinate", -1e7, 1e7, "m", "world coordinates in metres")
 YAW_DEG = Bound("yaw", -1e6, 1e6, "deg", "a yaw in degrees")
 
@@ -117,23 +98,70 @@ CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", 
 MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
 
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
-_PLAN_OPTIONS = {**_SCENE_OPTIONS, "v": V, "tag_size": TAG_SIZE, "height": PLANE_HEIGHT, "level": LEVEL,
-                 "grid_spacing": GRID_SPACING, "clearance": CLEARANCE, "yaws": YAWS, "marker_spacing": MARKER_SPACING,
-                 "placement_seed": PLACEMENT_SEED, "workers": WORKERS}
 
-BOUNDS: dict[str, dict[str, Bound]] = {
-    "scene export": {"seed": SEED, "voxel": VOXEL},
-    "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
-    "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
-    "plan": {**_PLAN_OPTIONS, "k": K},
-    "evaluate": {**_PLAN_OPTIONS, "tests": TESTS, "runs": RUNS, "test_seed": TEST_SEED, "tag_scale": TAG_SCALE,
-                 "shift": SHIFT},
-    "study": {**_PLAN_OPTIONS, "tests": TESTS, "test_seed": TEST_SEED},
-    "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
+_FIELD_BOUNDS = {
+    "K": ("plan", "placement.k"), "V": ("plan", "placement.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
+    "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
+    "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
+    "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
+    "MARKER_SPACING": ("plan", "discretize.candidates.marker_spacing"), "WORKERS": ("plan", "runtime.workers"),
+    "TESTS": ("evaluate", "test.tests"), "RUNS": ("evaluate", "study.runs"), "EVAL_K": ("evaluate", "study.ks"),
+    "TAG_SCALE": ("evaluate", "study.tag_scale"), "SHIFT": ("evaluate", "study.shift"),
+    "TEST_SEED": ("evaluate", "test.seed"),
 }
-"""Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
-pixels, ``plan --height`` metres). Comma-separated options are parsed by :func:`parse_floats` /
-:func:`parse_int_list` and checked there."""
+"""Bounds of config fields, by their old names here: each is built from its field's
+:func:`~markerplace.settings.setting` (the one home of the bound)."""
+
+
+def _configs() -> dict:
+    """The root configs of ``plan`` and ``evaluate`` (defaults), imported when first needed."""
+    from markerplace.plan.planner import PlanConfig
+    from markerplace.testbed.config import EvaluateConfig
+
+    return {"plan": PlanConfig(), "evaluate": EvaluateConfig()}
+
+
+def field_bound(root: str, path: str) -> Bound:
+    """The :class:`Bound` of the config field ``path`` of ``root`` (``plan``/``evaluate``)."""
+    from markerplace.settings import walk
+
+    leaf = next(leaf for leaf in walk(_configs()[root]) if leaf.path == path)
+    return leaf.setting.bound()
+
+
+_BOUNDS: dict[str, dict[str, Bound]] = {}
+
+
+def _bounds() -> dict[str, dict[str, Bound]]:
+    """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
+    pixels, ``plan --height`` metres); the options of config fields come from the fields.
+    Comma-separated options are parsed by :func:`parse_floats` / :func:`parse_int_list` and
+    checked there."""
+    if not _BOUNDS:
+        from markerplace.settings import bounds_by_dest
+
+        configs = _configs()
+        plan = {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "evaluate")}
+        evaluate = bounds_by_dest(configs["evaluate"], "evaluate")
+        _BOUNDS.update({
+            "scene export": {"seed": SEED, "voxel": VOXEL},
+            "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
+            "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
+            "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan")},
+            "evaluate": {**plan, **evaluate},
+            "study": {**plan, "tests": evaluate["tests"], "test_seed": evaluate["test_seed"]},
+            "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
+        })
+    return _BOUNDS
+
+
+def __getattr__(name: str):
+    """``BOUNDS`` and the bounds of config fields (:data:`_FIELD_BOUNDS`), built on first use."""
+    if name == "BOUNDS":
+        return _bounds()
+    if name in _FIELD_BOUNDS:
+        return field_bound(*_FIELD_BOUNDS[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def command_name(args) -> str:
@@ -150,7 +178,7 @@ def check_args(args) -> None:
     ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
     with it). Whether a scheduler answers is checked once the output paths are
     (:func:`markerplace.cli.options.check_cluster_answers`)."""
-    for dest, bound in BOUNDS.get(command_name(args), {}).items():
+    for dest, bound in _bounds().get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
             bound.check(value)
@@ -159,7 +187,7 @@ def check_args(args) -> None:
     if getattr(args, "start", None) is not None:
         parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
-        parse_int_list(args.k, "--k", EVAL_K)
+        parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks"))
     if getattr(args, "cluster", None) is not None:
         from markerplace.runtime.cluster import parse_cluster
 
@@ -224,21 +252,12 @@ def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
 
 
 def check_plan_config(config) -> None:
-    """Numeric settings of a :class:`~markerplace.plan.planner.PlanConfig` (the same bounds as the
-    command line)."""
-    d, p = config.discretize, config.placement
-    K.check(p.k)
-    V.check(p.v)
-    TAG_SIZE.check(p.tag_size)
-    PLACEMENT_SEED.check(p.seed)
-    PLANE_HEIGHT.check(d.height)
-    if d.level is not None:  # None: every storey (--level all)
-        LEVEL.check(d.level)
-    GRID_SPACING.check(d.grid_spacing)
-    CLEARANCE.check(d.clearance)
-    YAWS.check(d.num_yaws)
-    MARKER_SPACING.check(d.marker_spacing)
-    WORKERS.check(config.runtime.workers)
+    """Numeric settings of a :class:`~markerplace.plan.planner.PlanConfig`: every bounded field
+    (the same bounds as the command line, :func:`markerplace.settings.check_bounds`)."""
+    from markerplace.settings import check_bounds
+
+    check_bounds(config)
+    d = config.discretize
     if d.start is not None:
         for v in d.start:
             if not math.isfinite(float(v)):
@@ -247,18 +266,12 @@ def check_plan_config(config) -> None:
 
 def check_evaluate_config(config) -> None:
     """Numeric settings of an :class:`~markerplace.testbed.config.EvaluateConfig`."""
-    test, study = config.test, config.study
-    TESTS.check(test.tests)
-    RUNS.check(study.runs)
-    if not study.ks:
+    from markerplace.settings import check_bounds
+
+    if not config.study.ks:
         raise UserError("--k is empty: give positive marker counts, e.g. 5,10,15,20")
-    for k in study.ks:
-        EVAL_K.check(k)
-    TAG_SCALE.check(study.tag_scale)
-    SHIFT.check(study.shift)
+    check_bounds(config)
     SEED.check(config.seed)
-    if test.seed is not None:
-        TEST_SEED.check(test.seed)
     if config.localization.vlad_clusters < 2:
         raise UserError(f"VLAD clusters {config.localization.vlad_clusters} must be at least 2")
 

@@ -62,6 +62,6 @@ def add_study_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scales", default="0.5,0.75,1.25", help="printed size factors (default 0.5,0.75,1.25)")
     p.add_argument("--no-detection-study", action="store_true", help="leave out the run without tag detection")
     p.add_argument("--no-similarity-study", action="store_true", help="leave out OMP without the similarity analysis")
-    add_plan_args(p)
+    add_plan_args(p, "study")
     p.set_defaults(func=cmd_study)
     return p

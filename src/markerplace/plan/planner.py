@@ -27,6 +27,8 @@ from markerplace.runtime.executor import RuntimeConfig, make_executor
 from markerplace.runtime.stages import cached
 from markerplace.tagfamily import DRAWING_VERSION
 from markerplace.scene.spec import SceneSpec
+from markerplace.settings import setting
+from markerplace.validation import SEED_MAX
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization
@@ -61,8 +63,7 @@ class PlacementConfig:
             ``paper`` (relative-pose factor, as published) or ``corners`` (projected tag
             corners; depends on distance, viewing angle and tag size).
         tag_size: black-square edge of the printed tags, metres: the one home of the tag size
-            (:class:`PlanConfig` derives ``discretize.tag_size``, the tag that must fit flat on
-            a wall, from it; the scoring and the placed markers use it too).
+            (the discretization's fit check, the scoring and the placed markers use it).
         similarity: down-weight look-alike points (the paper's similarity analysis).
         lazy: lazy greedy (exactly the same picks as plain greedy, far fewer evaluations).
         seed: seed of the randomized methods (random and uniform).
@@ -75,24 +76,45 @@ class PlacementConfig:
             map; :mod:`markerplace.testbed.calibration`).
     """
 
-    k: int = 20
-    method: str = "omp"
-    v: float = 90.0
-    marker_model: str = "paper"
-    tag_size: float = DEFAULT_TAG_SIZE
-    similarity: bool = True
+    k: int = setting(20, flag="-k", bounds=(1, 10_000), commands=("plan",), help="number of markers to place",
+                     doc="number of markers", hint="the number of markers to place, e.g. 20")
+    method: str = setting("omp", flag="--method", choices=lambda: PLACEMENT_METHODS.names(), commands=("plan",),
+                          help=lambda: f"placement method: {PLACEMENT_METHODS.help()}",
+                          doc=lambda: "a registered placement method: " + ", ".join(
+                              f"`{n}`" + (f" ({c.summary})" if getattr(c, "summary", "") else "")
+                              for n, c in PLACEMENT_METHODS.items()))
+    v: float = setting(90.0, flag="-v", bounds=(0.0, 100.0), units="%", hint="a percentage such as 90",
+                       help="OMP percentile parameter v in [0, 100]: the most visible v % of candidates compete "
+                            "(q is derived from v as in the paper)")
+    marker_model: str = setting("paper", flag="--marker-model", choices=lambda: MARKER_MODELS.names(),
+                                help=lambda: f"marker information model: {MARKER_MODELS.help()}")
+    tag_size: float = setting(DEFAULT_TAG_SIZE, flag="--tag-size", bounds=(0.02, 3.0), units="m",
+                              hint="the black-square edge in metres, e.g. 0.4",
+                              help="black-square edge of the printed tags, metres; the one tag size (the "
+                                   "discretization's fit check uses it too)")
+    similarity: bool = setting(True, flag="--no-similarity", const=False,
+                               help="turn the look-alike (similarity) analysis off (no down-weighting of repeated "
+                                    "features)")
     lazy: bool = True
-    seed: int = 0
+    seed: int = setting(0, flag="--placement-seed", bounds=(0, SEED_MAX), hint=f"a seed in 0..{SEED_MAX}, e.g. 0",
+                        help=lambda: "seed of the " + "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
+                        + " placements")
     first_tag_id: int = 0
-    calibration_poses: str = "map"
+    calibration_poses: str = setting("map", flag="--calibration-poses", choices=lambda: CALIBRATION_POSES,
+                                     help="images expected-recall fits its success model on: map (the map images, "
+                                          "each without its own location) or offgrid (1000 test-like renders "
+                                          "between the map poses, never test images)")
 
 
 @dataclass(frozen=True)
 class PlanConfig:
-    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory.
+    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory
+    (``plan --config`` reads it back, or a TOML file with the same tables:
+    :mod:`markerplace.config_file`).
 
     ``runtime`` (where the per-image work runs) changes speed, never results: it is left out of
-    every cache key.
+    every cache key. The tag size lives in ``placement`` alone; the discretization gets it as
+    an argument.
     """
 
     discretize: DiscretizeConfig = field(default_factory=DiscretizeConfig)
@@ -101,12 +123,6 @@ class PlanConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
-
-    def __post_init__(self) -> None:
-        """Derive ``discretize.tag_size`` from ``placement.tag_size`` (the one home of the tag
-        size): whatever ``discretize.tag_size`` was given is replaced."""
-        if self.discretize.tag_size != self.placement.tag_size:
-            object.__setattr__(self, "discretize", replace(self.discretize, tag_size=self.placement.tag_size))
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,8 +228,10 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path,
 
     # the parts' names and glass decide which wall spots may carry a tag (plan.wall_candidates)
     labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
-    disc_key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.discretize)
-    disc = cached("discretize", run_dir / "discretization.npz", disc_key, lambda: discretize(scene, config.discretize),
+    disc_key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels,
+                             config.discretize.cache_view(config.placement.tag_size))
+    disc = cached("discretize", run_dir / "discretization.npz", disc_key,
+                  lambda: discretize(scene, config.discretize, config.placement.tag_size),
                   save_discretization, load_discretization, timings)
     N, C = len(disc.world_from_cam), len(disc.candidate_world_from_marker)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
