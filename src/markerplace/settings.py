@@ -166,6 +166,8 @@ def shown_default(leaf: Leaf) -> str:
     s = leaf.setting
     if s.shown_default is not None:
         return s.shown_default
+    if s.const is not NO_CONST:
+        return "off"  # a switch: the field's default holds while it is not given
     v = leaf.value
     if v is None:
         return "none"
@@ -251,16 +253,46 @@ def check_bounds(config: Any, prefix: str = "") -> None:
             b.check(v)
 
 
-RUN_OPTIONS: dict[str, dict[str, str | None]] = {
-    "plan": {"scene": None, "--up": None, "--unit-scale": None, "--seed": None, "--out": None, "--config": None,
-             "--existing": "markers already on the walls (same format as placement.json); each must hang on a wall",
-             "--exclude": None, "--paper": None, "--force": None, "--adopt": None, "--quiet": None},
-    "evaluate": {"scene": None, "--up": None, "--unit-scale": None, "--seed": None, "--out": None,
-                 "--placements": None, "--force": None, "--adopt": None, "--quiet": None},
+_SCENE_RUN_OPTIONS = {
+    "scene": ("required", "a built-in scene name (`markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)"),
+    "--up": ("z (glTF: y)", "up axis of a mesh file (`z`, `y`, `-y`, `x`, `-x`, `-z`; `--up -x` and `--up=-x` both "
+                            "work, as do `--start -2.5,1` and `--pose -1,2,1.5,90`): OBJ/PLY have no convention; glTF "
+                            "is y-up by its specification, which `--up` overrides"),
+    "--unit-scale": ("1", "multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)"),
+    "--seed": ("0", "seed of the procedural generator of built-in scenes"),
+}
+_COMMON_RUN_OPTIONS = {
+    "--force": ("off", "run even when the size guard refuses (see below)"),
+    "--adopt": ("off", "use a non-empty `--out` folder markerplace did not make: the run's files are added, the files "
+                       "already there are never replaced or deleted (see [Run folders](#run-folders-what-markerplace-"
+                       "writes-and-deletes))"),
+    "--quiet": ("off", None),
+}
+
+RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
+    "plan": {**_SCENE_RUN_OPTIONS, "--out": None,
+             "--config": ("none", "settings from a TOML file or a plan's `config.json` (see "
+                                  "[Settings files](#settings-files-plan---config)); options given on the command "
+                                  "line override it"),
+             "--existing": ("none", "markers already on the walls (same format as placement.json); each must hang "
+                                    "on a wall"),
+             "--exclude": ("none", "spots and boxes where no tag may go, in the model's coordinates (format below; "
+                                   "`report.html`'s review buttons download one); applied when placing, so a re-run "
+                                   "reuses every cached stage and renders nothing"),
+             "--paper": ("a4", "paper of `tags.pdf`: `a4`, `letter`, `a3` (a tag larger than the page is tiled) or "
+                               "`none` (one page per tag at its own size)"),
+             **_COMMON_RUN_OPTIONS},
+    "evaluate": {**_SCENE_RUN_OPTIONS,
+                 "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
+                                 "the held-out ceiling's splits and (unless `--test-seed`) the test poses"),
+                 "--out": None,
+                 "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
+                                          "method (checked before any work)"),
+                 **_COMMON_RUN_OPTIONS},
 }
 """Options of ``plan`` and ``evaluate`` that set no config field: where the inputs are, where
-the outputs go and how the run behaves (flag -> the docs' text, None: its ``--help``). Every
-other option is a config field's (:func:`setting`)."""
+the outputs go and how the run behaves; flag -> (the docs' default, the docs' text), None for
+either: from its ``--help``. Every other option is a config field's (:func:`setting`)."""
 
 NO_FLAG: dict[str, str] = {
     "placement.lazy": "an implementation switch (the same picks either way); set it in a --config file",

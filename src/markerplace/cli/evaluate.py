@@ -80,7 +80,7 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     )
     add_scene_args(p)
     p.add_argument("--out", required=True, help="run directory (outputs, caches; an interrupted run resumes)")
-    p.add_argument("--placements", default=None,
+    p.add_argument("--placements", default=None, metavar="DIR",
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
     study = p.add_argument_group("study switches")
     diagnostics = p.add_argument_group("diagnostics (each costs extra localizations)")

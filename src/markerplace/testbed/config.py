@@ -158,12 +158,24 @@ class DiagnosticsConfig:
     ceiling: bool = setting(False, flag="--ceiling", const=True,
                             help="oracle ceiling: every candidate evaluated alone on the test images, the greedy "
                                  "best k evaluated as a placement (a diagnostic that uses the test images, never a "
-                                 "method); writes ceiling.md and adds 'ceiling' rows")
+                                 "method); writes ceiling.md and adds 'ceiling' rows",
+                            doc="the oracle ceiling (a diagnostic that uses the test images, never a method): every "
+                                "candidate evaluated alone on the test images, then per test set the k candidates "
+                                "that localize the most test images picked greedily from those outcomes and "
+                                "evaluated as a placement (`ceiling` rows); `ceiling.md` sets every method against "
+                                "it, and says how much of the ceiling's lead is selection on the test images (picks "
+                                "made on a random half of them scored on the other half, against picks made on that "
+                                "half: the `held out` and `in sample` rows, 100 splits seeded by `--seed`)")
     calibration: bool = setting(False, flag="--calibration", const=True,
                                 help="localize every map image against the rest of the map (leave one location out) "
                                      "without and with each placement's tags, and report how well the score "
                                      "predicts success per marker model: calibration.md, calibration.png, "
-                                     "map_outcomes.npz")
+                                     "map_outcomes.npz",
+                                doc="every map image localized against the map without its own location, without "
+                                    "tags and with each evaluated placement's tags: `calibration.md` (per marker "
+                                    "model: AUC of the score as a predictor of success, without and with tags, the "
+                                    "fitted logistic, observed vs fitted success per score decile), "
+                                    "`calibration.png`, `map_outcomes.npz`")
 
 
 @dataclass(frozen=True)
