@@ -5,9 +5,8 @@ metadata. From it come
 
 * the command-line option (:func:`add_setting_args`: flag, type, choices, ``--help`` text with
   the default),
-* the bounds check with its one-line message (:meth:`Setting.bound`, a
-  :class:`~markerplace.validation.Bound`; :mod:`markerplace.validation` builds its tables from
-  these),
+* the bounds check with its one-line message (:meth:`Setting.bound`, a :class:`Bound`;
+  :mod:`markerplace.cli.bounds` gathers them per subcommand, :func:`check_bounds` checks a config),
 * the option tables of ``docs/cli.md`` (:mod:`markerplace.cli.option_docs`, rewritten by
   ``scripts/cli_docs.py``),
 * the keys of ``plan --config FILE.toml`` (:mod:`markerplace.config_file`).
@@ -23,13 +22,75 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import math
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
 from typing import Any, Callable, Iterator, Sequence
+
+from markerplace.errors import UserError
 
 log = logging.getLogger(__name__)
 
 __all__ = ["Setting", "setting", "walk", "add_setting_args", "values_from_args", "apply", "RUN_OPTIONS", "NO_FLAG"]
 
+
+SEED_MAX = 2**32 - 1
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Allowed values of one numeric option.
+
+    Attributes:
+        option: the flag as the user types it (``--grid-spacing``).
+        lo, hi: inclusive range.
+        unit: unit printed after the numbers (``m``, ``px``, ``deg``, ``%``), or ``""``.
+        hint: what to give instead, e.g. ``"the camera grid spacing in metres, e.g. 0.5"``.
+        integer: the option is an integer (messages say "at least"/"at most").
+    """
+
+    option: str
+    lo: float
+    hi: float
+    unit: str
+    hint: str
+    integer: bool = False
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` unchanged, or raise :class:`UserError` naming the option, the value,
+        the range with its unit and what to give instead."""
+        unit = f" {self.unit}" if self.unit else ""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise UserError(f"{self.option} {value!r} is not a number: give {self.hint}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise UserError(f"{self.option} {value} is not a finite number: give {self.hint}")
+        if self.integer and value != int(value):
+            raise UserError(f"{self.option} {value} must be a whole number: give {self.hint}")
+        if self.integer:
+            if value < self.lo:
+                raise UserError(f"{self.option} {_fmt(value)} must be at least {_fmt(self.lo)}{unit}: give {self.hint}")
+            if value > self.hi:
+                raise UserError(f"{self.option} {_fmt(value)} must be at most {_fmt(self.hi)}{unit}: give {self.hint}")
+        elif not self.lo <= value <= self.hi:
+            raise UserError(f"{self.option} {_fmt(value)}{unit} is outside [{_fmt(self.lo)}, {_fmt(self.hi)}]{unit}: "
+                            f"give {self.hint}")
+        return value
+
+
+def _fmt(v: float) -> str:
+    """A short text of a number (huge integers abbreviated)."""
+    if isinstance(v, int):
+        text = str(v)
+        return text if len(text) <= 15 else f"{text[:4]}...({len(text.lstrip('-'))} digits)"
+    if v.is_integer() and abs(v) < 1e15:
+        return str(int(v))
+    return f"{v:g}"
+
+
+OCCUPANCY_CELL = 0.05
+"""Occupancy cell size of the discretization, metres: finer camera or marker spacing means nothing."""
 
 class _NoConst:
     def __repr__(self) -> str:
@@ -88,9 +149,7 @@ class Setting:
         return doc or self.help_text()
 
     def bound(self, option: str | None = None):
-        """The :class:`~markerplace.validation.Bound` of the value (None without bounds)."""
-        from markerplace.validation import Bound
-
+        """The :class:`Bound` of the value (None without bounds)."""
         if self.bounds is None:
             return None
         return Bound(option or self.flag or "?", self.bounds[0], self.bounds[1], self.units, self.hint, self.integer)
@@ -236,7 +295,7 @@ def values_from_args(args: argparse.Namespace, config: Any, command: str) -> dic
 
 
 def bounds_by_dest(config: Any, command: str) -> dict:
-    """argparse dest -> :class:`~markerplace.validation.Bound` of the numeric options of ``config``."""
+    """argparse dest -> :class:`Bound` of the numeric options of ``config``."""
     return {_dest(leaf.setting.flag): leaf.setting.bound() for leaf in flagged(config, command)
             if leaf.setting.bounds is not None and leaf.setting.const is NO_CONST and leaf.setting.convert is None}
 

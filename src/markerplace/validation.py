@@ -3,13 +3,16 @@
 Everything here raises :class:`~markerplace.errors.UserError` (one line, exit code 2) and runs
 in milliseconds, before the expensive stages.
 
-Every numeric command-line option has one :class:`Bound` (finite, in a range, with its unit and
-an example) in :data:`BOUNDS`; :func:`check_args` applies them to a parsed command line (called
-once by :func:`markerplace.cli.main.main` for every subcommand), and :func:`check_plan_config` /
-:func:`check_evaluate_config` apply the same bounds to the library's config objects.
-:func:`parse_floats` and :func:`parse_int_list` parse the comma-separated options (``--pose``,
-``--start``, ``--k``); :func:`check_pose_in_scene` and :func:`check_render_sees_something` refuse
-a ``render`` pose outside the model or seeing nothing of it. Lengths are metres, angles degrees.
+A :class:`~markerplace.settings.Bound` (finite, in a range, with its unit and an example) checks
+one numeric option. The bounds of options that set a config field live on the field
+(:func:`markerplace.settings.setting`); the other options' are here (``--unit-scale``, ``--seed``,
+``render``, ``fuse``, ``check``). :mod:`markerplace.cli.bounds` gathers both per subcommand and
+applies them to a parsed command line; :func:`check_plan_config` / :func:`check_evaluate_config`
+apply the fields' bounds to the library's config objects. :func:`parse_floats`,
+:func:`parse_int_list`, :func:`parse_level` and :func:`parse_xy` parse the comma-separated and
+special options (``--pose``, ``--start``, ``--k``, ``--level``); :func:`check_pose_in_scene` and
+:func:`check_render_sees_something` refuse a ``render`` pose outside the model or seeing nothing
+of it. Lengths are metres, angles degrees.
 
 The other up-front checks: output paths in :mod:`markerplace.output_checks`, the run-size guard
 in :mod:`markerplace.pipelines.size_guard`.
@@ -18,69 +21,11 @@ in :mod:`markerplace.pipelines.size_guard`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 from markerplace.errors import UserError
 
-SEED_MAX = 2**32 - 1
-
-
-@dataclass(frozen=True)
-class Bound:
-    """Allowed values of one numeric option.
-
-    Attributes:
-        option: the flag as the user types it (``--grid-spacing``).
-        lo, hi: inclusive range.
-        unit: unit printed after the numbers (``m``, ``px``, ``deg``, ``%``), or ``""``.
-        hint: what to give instead, e.g. ``"the camera grid spacing in metres, e.g. 0.5"``.
-        integer: the option is an integer (messages say "at least"/"at most").
-    """
-
-    option: str
-    lo: float
-    hi: float
-    unit: str
-    hint: str
-    integer: bool = False
-
-    def check(self, value: Any) -> Any:
-        """Return ``value`` unchanged, or raise :class:`UserError` naming the option, the value,
-        the range with its unit and what to give instead."""
-        unit = f" {self.unit}" if self.unit else ""
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise UserError(f"{self.option} {value!r} is not a number: give {self.hint}") from None
-        if isinstance(value, float) and not math.isfinite(value):
-            raise UserError(f"{self.option} {value} is not a finite number: give {self.hint}")
-        if self.integer and value != int(value):
-            raise UserError(f"{self.option} {value} must be a whole number: give {self.hint}")
-        if self.integer:
-            if value < self.lo:
-                raise UserError(f"{self.option} {_fmt(value)} must be at least {_fmt(self.lo)}{unit}: give {self.hint}")
-            if value > self.hi:
-                raise UserError(f"{self.option} {_fmt(value)} must be at most {_fmt(self.hi)}{unit}: give {self.hint}")
-        elif not self.lo <= value <= self.hi:
-            raise UserError(f"{self.option} {_fmt(value)}{unit} is outside [{_fmt(self.lo)}, {_fmt(self.hi)}]{unit}: "
-                            f"give {self.hint}")
-        return value
-
-
-def _fmt(v: float) -> str:
-    """A short text of a number (huge integers abbreviated)."""
-    if isinstance(v, int):
-        text = str(v)
-        return text if len(text) <= 15 else f"{text[:4]}...({len(text.lstrip('-'))} digits)"
-    if v.is_integer() and abs(v) < 1e15:
-        return str(int(v))
-    return f"{v:g}"
-
-
-OCCUPANCY_CELL = 0.05
-"""Occupancy cell size of the discretization, metres: finer camera or marker spacing means nothing."""
+from markerplace.settings import OCCUPANCY_CELL, SEED_MAX, Bound  # noqa: F401 (re-exported)
 
 UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
 SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
@@ -97,104 +42,27 @@ MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 
 CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", integer=True)
 MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
 
-_SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
+def parse_level(text: str):
+    """``--level``: ``all`` (None) or a storey index >= 0 (argparse type: raises
+    :class:`argparse.ArgumentTypeError`)."""
+    import argparse
 
-_FIELD_BOUNDS = {
-    "K": ("plan", "placement.k"), "V": ("plan", "placement.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
-    "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
-    "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
-    "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
-    "MARKER_SPACING": ("plan", "discretize.candidates.marker_spacing"), "WORKERS": ("plan", "runtime.workers"),
-    "TESTS": ("evaluate", "test.tests"), "RUNS": ("evaluate", "study.runs"), "EVAL_K": ("evaluate", "study.ks"),
-    "TAG_SCALE": ("evaluate", "study.tag_scale"), "SHIFT": ("evaluate", "study.shift"),
-    "TEST_SEED": ("evaluate", "test.seed"),
-}
-"""Bounds of config fields, by their old names here: each is built from its field's
-:func:`~markerplace.settings.setting` (the one home of the bound)."""
-
-
-def _configs() -> dict:
-    """The root configs of ``plan`` and ``evaluate`` (defaults), imported when first needed."""
-    from markerplace.plan.planner import PlanConfig
-    from markerplace.testbed.config import EvaluateConfig
-
-    return {"plan": PlanConfig(), "evaluate": EvaluateConfig()}
+    if str(text).strip().lower() == "all":
+        return None
+    try:
+        level = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 or 'all'") from None
+    if level < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 (0 = lowest) or 'all'")
+    return level
 
 
-def field_bound(root: str, path: str) -> Bound:
-    """The :class:`Bound` of the config field ``path`` of ``root`` (``plan``/``evaluate``)."""
-    from markerplace.settings import walk
-
-    leaf = next(leaf for leaf in walk(_configs()[root]) if leaf.path == path)
-    return leaf.setting.bound()
-
-
-_BOUNDS: dict[str, dict[str, Bound]] = {}
-
-
-def _bounds() -> dict[str, dict[str, Bound]]:
-    """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
-    pixels, ``plan --height`` metres); the options of config fields come from the fields.
-    Comma-separated options are parsed by :func:`parse_floats` / :func:`parse_int_list` and
-    checked there."""
-    if not _BOUNDS:
-        from markerplace.settings import bounds_by_dest
-
-        configs = _configs()
-        plan = {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "evaluate")}
-        evaluate = bounds_by_dest(configs["evaluate"], "evaluate")
-        _BOUNDS.update({
-            "scene export": {"seed": SEED, "voxel": VOXEL},
-            "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
-            "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
-            "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan")},
-            "evaluate": {**plan, **evaluate},
-            "study": {**plan, "tests": evaluate["tests"], "test_seed": evaluate["test_seed"]},
-            "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
-        })
-    return _BOUNDS
-
-
-def __getattr__(name: str):
-    """``BOUNDS`` and the bounds of config fields (:data:`_FIELD_BOUNDS`), built on first use."""
-    if name == "BOUNDS":
-        return _bounds()
-    if name in _FIELD_BOUNDS:
-        return field_bound(*_FIELD_BOUNDS[name])
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def command_name(args) -> str:
-    """``"plan"``, ``"render"``, ``"evaluate"``, ``"scene export"``, ... of a parsed command line."""
-    name = getattr(args, "command", None) or ""
-    if name == "scene":
-        name = f"scene {getattr(args, 'scene_command', '') or ''}".strip()
-    return name
-
-
-def check_args(args) -> None:
-    """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
-    default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
-    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
-    with it). Whether a scheduler answers is checked once the output paths are
-    (:func:`markerplace.cli.options.check_cluster_answers`)."""
-    for dest, bound in _bounds().get(command_name(args), {}).items():
-        value = getattr(args, dest, None)
-        if value is not None:
-            bound.check(value)
-    if getattr(args, "pose", None) is not None:
-        parse_floats(args.pose, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
-    if getattr(args, "start", None) is not None:
-        parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
-    if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
-        parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks"))
-    if getattr(args, "cluster", None) is not None:
-        from markerplace.runtime.cluster import parse_cluster
-
-        parse_cluster(args.cluster)
-        if getattr(args, "workers", 0):
-            raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
-                            "workers do the work (give their number in local:N); leave --workers out")
+def parse_xy(text: str | None):
+    """``--start`` X,Y: two finite coordinates, metres (None stays None)."""
+    if text is None:
+        return None
+    return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
 
 
 def parse_floats(text: str, option: str, names: Sequence[str], bounds: Sequence[Bound]) -> list[float]:

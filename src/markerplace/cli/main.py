@@ -278,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
                     parser.parse_args(["scene", "--help"])
                 parser.print_help()
                 return 2
-            from markerplace.validation import check_args
+            from markerplace.cli.bounds import check_args
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
             try:

@@ -14,6 +14,8 @@ import argparse
 import logging
 from typing import Sequence
 
+from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
+
 log = logging.getLogger(__name__)
 
 __all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy",
@@ -25,14 +27,6 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", default=None, help="up axis of the mesh file: z, y, -y, x, -x, -z (default: y for glTF, its specification; z for OBJ/PLY)")
     p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
     p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")
-
-
-def parse_xy(text: str | None):
-    if text is None:
-        return None
-    from markerplace.validation import COORDINATE, parse_floats
-
-    return tuple(parse_floats(text, "--start", ("X", "Y"), (COORDINATE, COORDINATE)))
 
 
 def plan_inputs_in_scene_frame(config, scene, force: bool, evaluate_config=None, extra_placements: int = 0):
@@ -69,35 +63,11 @@ def check_cluster_answers(args: argparse.Namespace) -> None:
         check_scheduler(args.cluster)
 
 
-def parse_level(text: str):
-    """``--level``: ``all`` (None) or a storey index >= 0."""
-    if str(text).strip().lower() == "all":
-        return None
-    try:
-        level = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 or 'all'") from None
-    if level < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a storey: give N >= 0 (0 = lowest) or 'all'")
-    return level
-
-
 def parse_allow(text: str | None) -> tuple[str, ...]:
-    """``--allow``: comma list of :data:`~markerplace.plan.discretize.wall_candidates.ALLOWABLE` keys
-    (``doors,furniture``); ``none`` or empty: nothing. Raises UserError for an unknown one."""
-    from markerplace.errors import UserError
-    from markerplace.plan.discretize.wall_candidates import ALLOWABLE
+    """``--allow`` (:func:`markerplace.plan.discretize.candidate_rules.parse_allow`)."""
+    from markerplace.plan.discretize.candidate_rules import parse_allow as parse
 
-    if text is None:
-        return ()
-    items = [t.strip().lower() for t in str(text).split(",") if t.strip()]
-    if items == ["none"]:
-        return ()
-    unknown = [t for t in items if t not in ALLOWABLE]
-    if unknown:
-        raise UserError(f"--allow {text!r}: unknown {', '.join(map(repr, unknown))}; choose from "
-                        f"{', '.join(ALLOWABLE)} (comma-separated)")
-    return tuple(dict.fromkeys(items))
+    return parse(text)
 
 
 def plan_config_from_args(args: argparse.Namespace):

@@ -18,7 +18,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     from markerplace.scene.spec import SceneSpec
     from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
     from markerplace.testbed.study import StudyPlan, run_study
-    from markerplace.validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
+    from markerplace.cli.bounds import EVAL_K, SHIFT, TAG_SCALE, V
+    from markerplace.validation import parse_float_list, parse_int_list
     from markerplace.cli.options import check_cluster_answers, plan_config_for_budgets, plan_inputs_in_scene_frame
 
     ks = parse_int_list(args.k, "--k", EVAL_K)

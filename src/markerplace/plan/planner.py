@@ -27,8 +27,7 @@ from markerplace.runtime.executor import RuntimeConfig, make_executor
 from markerplace.runtime.stages import cached
 from markerplace.tagfamily import DRAWING_VERSION
 from markerplace.scene.spec import SceneSpec
-from markerplace.settings import setting
-from markerplace.validation import SEED_MAX
+from markerplace.settings import SEED_MAX, setting
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization

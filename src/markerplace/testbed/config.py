@@ -8,8 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from markerplace.errors import UserError
-from markerplace.settings import setting
-from markerplace.validation import SEED_MAX
+from markerplace.settings import SEED_MAX, setting
 from markerplace.testbed.metrics import THRESHOLDS
 from markerplace.testbed.marker_sets import NO_MARKERS, method_names
 from markerplace.testbed.poses import TEST_SETS
@@ -25,9 +24,12 @@ def _name_list(text) -> tuple[str, ...]:
 
 def _int_list(text) -> tuple[int, ...]:
     """``--k``: comma list of positive marker budgets."""
-    from markerplace.validation import EVAL_K, parse_int_list
+    from dataclasses import fields
 
-    return parse_int_list(text, "--k", EVAL_K)
+    from markerplace.validation import parse_int_list
+
+    ks = next(f for f in fields(StudyConfig) if f.name == "ks")
+    return parse_int_list(text, "--k", ks.metadata["setting"].bound())
 
 
 def _placement_help() -> str:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplace.markers import DEFAULT_TAG_SIZE
-from markerplace.settings import setting
-from markerplace.validation import OCCUPANCY_CELL
+from markerplace.errors import UserError
+from markerplace.settings import OCCUPANCY_CELL, setting
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.semantics import CATEGORIES, PartKind, classify
 
@@ -39,11 +39,19 @@ def rule_words(rule: str, tag_size: float) -> str:
             "off-wall": "standing off the wall", "in-opening": "in a wall opening"}.get(rule, f"on {rule}")
 
 
-def _parse_allow(text):
-    """``--allow`` text (or a config file's list) -> allowed keys (:func:`markerplace.cli.options.parse_allow`)."""
-    from markerplace.cli.options import parse_allow
-
-    return parse_allow(text)
+def parse_allow(text: str | None) -> tuple[str, ...]:
+    """``--allow``: comma list of :data:`ALLOWABLE` keys (``doors,furniture``); ``none`` or empty:
+    nothing. Raises UserError for an unknown one."""
+    if text is None:
+        return ()
+    items = [t.strip().lower() for t in str(text).split(",") if t.strip()]
+    if items == ["none"]:
+        return ()
+    unknown = [t for t in items if t not in ALLOWABLE]
+    if unknown:
+        raise UserError(f"--allow {text!r}: unknown {', '.join(map(repr, unknown))}; choose from "
+                        f"{', '.join(ALLOWABLE)} (comma-separated)")
+    return tuple(dict.fromkeys(items))
 
 
 @dataclass(frozen=True)
@@ -93,7 +101,7 @@ class CandidateConfig:
     max_scan_range: float = 10.0
     front_offset: float = 0.15
     open_front: float = 0.6
-    allow: tuple[str, ...] = setting((), flag="--allow", metavar="CATEGORIES", convert=_parse_allow, shown_default="none",
+    allow: tuple[str, ...] = setting((), flag="--allow", metavar="CATEGORIES", convert=parse_allow, shown_default="none",
                                      help=lambda: "let tags go on these too, comma-separated: " + ", ".join(ALLOWABLE)
                                      + "; by default tags go only on walls and columns (named from the model's part "
                                        "names, IFC classes, transparency and geometry; see docs/cli.md)",

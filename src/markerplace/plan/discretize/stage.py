@@ -39,8 +39,9 @@ from markerplace import geometry
 from markerplace.errors import UserError
 from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.runtime.cache import config_dict
-from markerplace.settings import setting
-from markerplace.validation import OCCUPANCY_CELL
+from markerplace.settings import OCCUPANCY_CELL, setting
+from markerplace.validation import parse_level as _parse_level
+from markerplace.validation import parse_xy as _parse_xy
 from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.floorplan import eye_level_support, storey_floor
@@ -52,20 +53,6 @@ from markerplace.plan.discretize.wall_candidates import RULES, CandidateConfig, 
 log = logging.getLogger(__name__)
 
 __all__ = ["DiscretizeConfig", "candidate_arithmetic", "discretize"]
-
-
-def _parse_level(text):
-    """``--level`` text (or a config file's value) -> storey index or None (every storey)."""
-    from markerplace.cli.options import parse_level
-
-    return parse_level(text)
-
-
-def _parse_xy(text):
-    """``--start`` text (or a config file's pair) -> (x, y) metres."""
-    from markerplace.cli.options import parse_xy
-
-    return parse_xy(text)
 
 
 @dataclass(frozen=True)
