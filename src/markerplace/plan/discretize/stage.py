@@ -92,9 +92,9 @@ class DiscretizeConfig:
                                 integer=True, hint="a storey index, 0 = lowest", shown_default="all",
                                 help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget")
     start: tuple[float, float] | None = setting(None, flag="--start", metavar="X,Y", convert=_parse_xy,
-                                                shown_default="none",
-                                                help="plan only the free region holding this point (default: "
-                                                     "every region of at least 2 m^2)")
+                                                shown_default="every region of at least 2 m^2",
+                                                help="plan only the free region holding this point (user frame, "
+                                                     "metres)")
     grid_spacing: float = setting(0.5, flag="--grid-spacing", bounds=(OCCUPANCY_CELL, 50.0), units="m",
                                   help="camera grid spacing, metres (the paper used 0.5-0.7)",
                                   hint=f"the camera grid spacing in metres, e.g. 0.5 (not finer than the "
