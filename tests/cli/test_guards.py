@@ -18,6 +18,7 @@ try:
     from markerplace import validation
 except ImportError:  # a version without it: its tests must fail, the CLI tests still run
     validation = None
+from markerplace.cli import bounds
 from markerplace.pipelines import size_guard
 from markerplace.errors import UserError
 
@@ -196,12 +197,12 @@ def _numeric_options(parser: argparse.ArgumentParser, prefix: str = ""):
 
 def test_every_numeric_option_has_a_bound():
     missing = [(cmd, dest) for cmd, dest in _numeric_options(build_parser())
-               if dest not in validation.BOUNDS.get(cmd, {})]
-    assert not missing, f"numeric options without a bound in markerplace.validation.BOUNDS: {missing}"
+               if dest not in bounds.BOUNDS.get(cmd, {})]
+    assert not missing, f"numeric options without a bound in markerplace.cli.bounds.BOUNDS: {missing}"
 
 
 def test_bound_messages_name_option_value_range_and_unit():
-    b = validation.GRID_SPACING
+    b = bounds.GRID_SPACING
     for value, needle in [(float("nan"), "not a finite number"), (-1.0, "-1 m is outside [0.05, 50] m"),
                           (1e300, "1e+300 m is outside"), ("x", "is not a number")]:
         with pytest.raises(UserError, match="--grid-spacing") as info:

@@ -38,7 +38,8 @@ def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_pat
     from markerplace.cli.main import build_parser
     from markerplace.cli.options import plan_config_for_budgets
     from markerplace.plan.config import validate
-    from markerplace.validation import EVAL_K, parse_int_list
+    from markerplace.cli.bounds import EVAL_K
+    from markerplace.validation import parse_int_list
 
     for command in ("study", "evaluate"):
         args = build_parser().parse_args([command, "tiny", "--out", str(tmp_path / command)])

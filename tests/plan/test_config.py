@@ -1,21 +1,26 @@
-"""Settings with one home: the tag size lives in PlacementConfig; the discretization's is derived."""
+"""Settings with one home: the tag size lives in PlacementConfig alone; the discretization gets it
+as an argument (and in its cache key), and its candidate settings are a nested CandidateConfig."""
 
-from dataclasses import replace
-
+from markerplace.plan.discretize.candidate_rules import CandidateConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.place.config import PlacementConfig
+from markerplace.settings import walk
 
 
-def test_discretize_tag_size_is_derived_from_placement():
+def test_the_tag_size_has_one_home():
     config = PlanConfig(placement=PlacementConfig(tag_size=0.3))
-    assert config.discretize.tag_size == 0.3
-    # whatever the discretization config says is replaced, also after dataclasses.replace
-    config = replace(config, discretize=replace(DiscretizeConfig(), tag_size=9.0, grid_spacing=0.7))
-    assert config.discretize.tag_size == 0.3 and config.discretize.grid_spacing == 0.7
-    config = replace(config, placement=replace(config.placement, tag_size=0.2))
-    assert config.discretize.tag_size == 0.2
-    assert PlanConfig().discretize.tag_size == PlacementConfig().tag_size
+    assert [leaf.path for leaf in walk(config) if leaf.path.endswith("tag_size")] == ["placement.tag_size"]
+    # the discretization's cache key holds the placement's tag size (a new size re-discretizes)
+    assert config.discretize.cache_view(config.placement.tag_size)["tag_size"] == 0.3
+    assert DiscretizeConfig().cache_view(0.2) != DiscretizeConfig().cache_view(0.3)
+
+
+def test_candidate_settings_are_nested_not_copied():
+    names = {leaf.path for leaf in walk(DiscretizeConfig())}
+    assert "candidates.marker_spacing" in names and "marker_spacing" not in names
+    assert not any(p.startswith("candidates.") and p[len("candidates."):] in ("height", "tag_size") for p in names)
+    assert isinstance(DiscretizeConfig().candidates, CandidateConfig)
 
 
 def test_cli_sets_the_tag_size_once():
@@ -23,4 +28,4 @@ def test_cli_sets_the_tag_size_once():
 
     args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--tag-size", "0.15"])
     config = plan_config_from_args(args)
-    assert config.placement.tag_size == config.discretize.tag_size == 0.15
+    assert config.placement.tag_size == 0.15

@@ -147,10 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
     add_scene_args(p_plan)
-    p_plan.add_argument("-k", type=int, default=20, help="number of markers to place (default 20)")
     p_plan.add_argument("--out", required=True, help="run directory (stages are cached here and reused)")
-    p_plan.add_argument("--method", default="omp", choices=PLACEMENT_METHODS.names(),
-                        help=f"placement method: {PLACEMENT_METHODS.help()} (default omp)")
+    p_plan.add_argument("--config", default=None, metavar="FILE",
+                        help="settings from a TOML file (tables as in config.json: [discretize], "
+                             "[discretize.candidates], [placement], ...) or a plan's config.json (reproduces that "
+                             "plan); options given here override it (see docs/cli.md)")
     p_plan.add_argument("--existing", default=None, help="JSON file of markers already on the walls; they count as placed")
     p_plan.add_argument("--exclude", default=None, metavar="FILE",
                         help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
@@ -225,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
                     parser.parse_args(["scene", "--help"])
                 parser.print_help()
                 return 2
-            from markerplace.validation import check_args
+            from markerplace.cli.bounds import check_args
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
             try:

@@ -18,7 +18,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     from markerplace.scene.spec import SceneSpec
     from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
     from markerplace.pipelines.study import StudyPlan, run_study
-    from markerplace.validation import EVAL_K, SHIFT, TAG_SCALE, V, parse_float_list, parse_int_list
+    from markerplace.cli.bounds import EVAL_K, SHIFT, TAG_SCALE, V
+    from markerplace.validation import parse_float_list, parse_int_list
     from markerplace.cli.options import plan_config_for_budgets
 
     ks = parse_int_list(args.k, "--k", EVAL_K)
@@ -61,6 +62,6 @@ def add_study_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scales", default="0.5,0.75,1.25", help="printed size factors (default 0.5,0.75,1.25)")
     p.add_argument("--no-detection-study", action="store_true", help="leave out the run without tag detection")
     p.add_argument("--no-similarity-study", action="store_true", help="leave out OMP without the similarity analysis")
-    add_plan_args(p)
+    add_plan_args(p, "study")
     p.set_defaults(func=cmd_study)
     return p

@@ -71,7 +71,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
     t0 = time.perf_counter()
     scene = scene_spec.load()
     timings["load"] = time.perf_counter() - t0
-    disc, disc_key = run_discretize(scene, config.discretize, run_dir, timings)
+    disc, disc_key = run_discretize(scene, config.discretize, config.placement.tag_size, run_dir, timings)
     if k is not None:
         check_k(k, len(disc.candidate_world_from_marker))
     marker_poses = np.concatenate([disc.candidate_world_from_marker,

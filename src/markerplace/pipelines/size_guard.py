@@ -371,7 +371,7 @@ def check_first_guess(config, scene, force: bool, evaluate_config=None, extra_pl
     if over_limits(estimate) and not over_limits(estimate, factor=RECOUNT_FACTOR) and not force:
         # the bound is loose (multi-level models): count the poses (seconds)
         log.info("run size: %s by the bounding box; counting the camera poses", estimate.describe())
-        poses = len(discretize(scene, config.discretize).world_from_cam)
+        poses = len(discretize(scene, config.discretize, config.placement.tag_size).world_from_cam)
         estimate = estimate_run(scene, config, evaluate_config, extra_placements, poses=poses)
     check_run_size(estimate, force=force, what="run size, a first guess before discretizing")
     return config

@@ -29,10 +29,13 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class PlanConfig:
-    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory.
+    """Every setting of a plan run, saved resolved as ``config.json`` in the run directory
+    (``plan --config`` reads it back, or a TOML file with the same tables:
+    :mod:`markerplace.config_file`).
 
     ``runtime`` (where the per-image work runs) changes speed, never results: it is left out of
-    every cache key.
+    every cache key. The tag size lives in ``placement`` alone; the discretization gets it as
+    an argument.
     """
 
     discretize: DiscretizeConfig = field(default_factory=DiscretizeConfig)
@@ -41,12 +44,6 @@ class PlanConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
-
-    def __post_init__(self) -> None:
-        """Derive ``discretize.tag_size`` from ``placement.tag_size`` (the one home of the tag
-        size): whatever ``discretize.tag_size`` was given is replaced."""
-        if self.discretize.tag_size != self.placement.tag_size:
-            object.__setattr__(self, "discretize", replace(self.discretize, tag_size=self.placement.tag_size))
 
 
 def validate(config: PlanConfig) -> None:

@@ -116,7 +116,9 @@ def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
         raise UserError(f"{path} was not written by `markerplace plan` (config.json has no scene or placement.json "
                         f"no markers): {rerun}")
     try:
-        config = config_from_dict(PlanConfig, config_json)
+        from markerplace.config_file import upgrade_legacy
+
+        config = config_from_dict(PlanConfig, upgrade_legacy(config_json))  # older folders: flat discretize
         markers = [marker_from_json(r) for r in placement["markers"]]
         existing = [marker_from_json(r) for r in config_json.get("existing_markers", [])]
     except (UserError, TypeError, ValueError, KeyError) as err:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
 from markerplace.errors import UserError
+from markerplace.settings import setting
 from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
 from markerplace.runtime.workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 
@@ -54,8 +55,14 @@ class RuntimeConfig:
         batch: items per task (0 = automatic: about four tasks per worker, at most 32 items).
     """
 
-    workers: int = 0
-    cluster: str | None = None
+    workers: int = setting(0, flag="--workers", bounds=(0, 256), shown_default="CPUs (max 4)",
+                           hint="0 (automatic) or a number of processes, e.g. 2",
+                           help="processes for rendering + SIFT, one GL context each (0: the CPU count, at most 4; "
+                                "1: in this process); not with --cluster")
+    cluster: str | None = setting(None, flag="--cluster", metavar="local:N|tcp://HOST:PORT",
+                                  help="run rendering + SIFT on a Dask cluster: local:N starts N local workers (N up "
+                                       "to the CPU count), an address (tcp://HOST:PORT, tls://HOST:PORT) uses a "
+                                       "running scheduler (results do not depend on where they run)")
     batch: int = 0
 
 

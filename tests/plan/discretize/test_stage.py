@@ -189,6 +189,8 @@ def test_two_storeys():
     (dict(tag_size=6.0), r"no candidate marker poses"),
 ])
 def test_errors(scene, kw, message):
+    kw = dict(kw)
+    tag_size = kw.pop("tag_size", 0.4)  # the placement's tag size, passed on its own
     with pytest.raises(UserError, match=message) as err:
-        discretize(scene, replace(DiscretizeConfig(), **kw))
+        discretize(scene, replace(DiscretizeConfig(), **kw), tag_size)
     assert "\n" not in str(err.value)

@@ -145,7 +145,7 @@ def test_walls_and_the_column_keep_candidates(default_disc):
     ("off-wall", PICTURE, "surface standing off the wall"), ("in-opening", DOOR, "panel in a wall opening"),
 ], ids=lambda v: v if isinstance(v, str) else "")
 def test_allow_restores_one_category(allow, obj, surface, default_disc):
-    d = discretize(rules_room(), DiscretizeConfig(**FAST, allow=(allow,)))
+    d = discretize(rules_room(), DiscretizeConfig(**FAST, candidates=CandidateConfig(allow=(allow,))))
     assert on(d, obj).any(), f"--allow {allow}: no candidate on the {obj[0]}"
     assert set(d.candidate_surface[on(d, obj)]) == {surface}
     others = [o for o in (WINDOW, CURTAIN, DOOR, GLASS, PICTURE, BOOKCASE) if o is not obj]
@@ -154,7 +154,7 @@ def test_allow_restores_one_category(allow, obj, surface, default_disc):
 
 
 def test_glass_is_never_allowed():
-    d = discretize(rules_room(), DiscretizeConfig(**FAST, allow=tuple(ALLOWABLE)))
+    d = discretize(rules_room(), DiscretizeConfig(**FAST, candidates=CandidateConfig(allow=tuple(ALLOWABLE))))
     assert not on(d, GLASS).any() and on(d, WINDOW).any()
     # the same pane, opaque: a tag fits there, so transparency alone kept it off
     opaque = rules_room()

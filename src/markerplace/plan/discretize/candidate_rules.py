@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markerplace.markers import DEFAULT_TAG_SIZE
+from markerplace.errors import UserError
+from markerplace.settings import OCCUPANCY_CELL, setting
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.semantics import CATEGORIES, PartKind, classify
 
@@ -36,18 +39,35 @@ def rule_words(rule: str, tag_size: float) -> str:
             "off-wall": "standing off the wall", "in-opening": "in a wall opening"}.get(rule, f"on {rule}")
 
 
+def parse_allow(text: str | None) -> tuple[str, ...]:
+    """``--allow``: comma list of :data:`ALLOWABLE` keys (``doors,furniture``); ``none`` or empty:
+    nothing. Raises UserError for an unknown one."""
+    if text is None:
+        return ()
+    items = [t.strip().lower() for t in str(text).split(",") if t.strip()]
+    if items == ["none"]:
+        return ()
+    unknown = [t for t in items if t not in ALLOWABLE]
+    if unknown:
+        raise UserError(f"--allow {text!r}: unknown {', '.join(map(repr, unknown))}; choose from "
+                        f"{', '.join(ALLOWABLE)} (comma-separated)")
+    return tuple(dict.fromkeys(items))
+
+
 @dataclass(frozen=True)
 class CandidateConfig:
-    """Settings of candidate marker poses.
+    """Settings of candidate marker poses (``plan --config``: the ``[discretize.candidates]`` table).
+
+    The eye level (tag centres above the local floor) is the discretization's ``height`` and the
+    tag size is the placement's ``tag_size``: both are passed to :func:`tag_fits` and
+    :func:`~markerplace.plan.discretize.wall_candidates.wall_candidates`, never copied here.
 
     Attributes:
-        height: tag centre above the local floor, metres (eye level).
         marker_spacing: candidates are at least this far apart (metres) unless their normals
             differ by more than ``normal_diff_deg`` degrees.
         normal_diff_deg: see ``marker_spacing``.
-        tag_size: edge of the black square that must fit flat, metres.
-        tag_border: white border around it that must be flat too, as a fraction of
-            ``tag_size`` per side (0.25: the rendered tag's 2-bit quiet zone).
+        tag_border: white border around the black square that must be flat too, as a fraction
+            of the tag size per side (0.25: the rendered tag's 2-bit quiet zone).
         flatness_tol: every sampled point of the tag square within this of the plane, metres.
         max_normal_z: |n_z| of a wall's face below this (near-vertical).
         scan_rays: rays per 360-degree scan.
@@ -69,10 +89,11 @@ class CandidateConfig:
         ceiling_margin: a surface reaching within this of the ceiling reaches it, metres.
     """
 
-    height: float = 1.5
-    marker_spacing: float = 1.0
+    marker_spacing: float = setting(1.0, flag="--marker-spacing", bounds=(OCCUPANCY_CELL, 100.0), units="m",
+                                    help="minimum spacing of candidate marker poses on a wall, metres",
+                                    hint=f"the spacing of candidate markers in metres, e.g. 1.0 (not finer than "
+                                         f"{OCCUPANCY_CELL:g} m)")
     normal_diff_deg: float = 30.0
-    tag_size: float = 0.4
     tag_border: float = 0.25
     flatness_tol: float = 0.02
     max_normal_z: float = 0.2
@@ -80,7 +101,14 @@ class CandidateConfig:
     max_scan_range: float = 10.0
     front_offset: float = 0.15
     open_front: float = 0.6
-    allow: tuple[str, ...] = ()
+    allow: tuple[str, ...] = setting((), flag="--allow", metavar="CATEGORIES", convert=parse_allow, shown_default="none",
+                                     help=lambda: "let tags go on these too, comma-separated: " + ", ".join(ALLOWABLE)
+                                     + "; by default tags go only on walls and columns (named from the model's part "
+                                       "names, IFC classes, transparency and geometry; see docs/cli.md)",
+                                     doc=lambda: "let tags go on these too, comma-separated (see \"Where tags may go\" "
+                                     "below): " + ", ".join(f"`{a}`" for a in ALLOWABLE) + "; by default tags go on "
+                                     "walls and columns only. Changes the candidates, so the stages after the "
+                                     "discretization run again")
     edge_step: float = 0.01
     profile_step: float = 0.02
     side_reach: float = 1.2
@@ -128,8 +156,8 @@ def _tag_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: CandidateConfig,
-             opaque: np.ndarray | None = None, n_side: int = 7) -> np.ndarray:
-    """(M,) bool: a tag of ``tag_size`` plus border centred at each (M, 3) point lies flat, with
+             opaque: np.ndarray | None = None, n_side: int = 7, tag_size: float = DEFAULT_TAG_SIZE) -> np.ndarray:
+    """(M,) bool: a tag of ``tag_size`` (black-square edge, metres) plus border centred at each (M, 3) point lies flat, with
     ``open_front`` of open space in front of all of it.
 
     Rays along -normal from ``standoff = open_front`` in front of the wall, over an n_side x n_side
@@ -143,7 +171,7 @@ def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: Ca
     if M == 0:
         return np.zeros(0, dtype=bool)
     standoff = float(config.open_front)
-    h = config.tag_size * (0.5 + config.tag_border)
+    h = tag_size * (0.5 + config.tag_border)
     a = np.linspace(-h, h, n_side)
     A, B = (v.ravel() for v in np.meshgrid(a, a))
     n, x, y = _tag_frame(normals)

@@ -31,15 +31,20 @@ The result, :class:`~markerplace.plan.discretize.artifact.Discretization`, and i
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from markerplace import geometry
 from markerplace.errors import UserError
+from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.runtime import cache
+from markerplace.runtime.cache import config_dict
 from markerplace.runtime.stages import cached
+from markerplace.settings import OCCUPANCY_CELL, setting
+from markerplace.validation import parse_level as _parse_level
+from markerplace.validation import parse_xy as _parse_xy
 from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.artifact import load as load_discretization
@@ -57,7 +62,10 @@ __all__ = ["DiscretizeConfig", "candidate_arithmetic", "discretize", "run_discre
 
 @dataclass(frozen=True)
 class DiscretizeConfig:
-    """Settings of the discretization stage.
+    """Settings of the discretization stage (``plan --config``: the ``[discretize]`` table).
+
+    The tag that must fit flat on a wall is the placement's (``placement.tag_size``): it is
+    passed to :func:`discretize`, not kept here.
 
     Attributes:
         height: eye level (cameras and tag centres) above the local floor, metres (paper: 1.5).
@@ -67,17 +75,6 @@ class DiscretizeConfig:
         grid_spacing: distance between camera locations, metres (paper: 0.5-0.7).
         clearance: minimum distance from a camera location to non-free space, metres.
         num_yaws: camera poses per location, yaw = 2 pi j / num_yaws (paper: 8).
-        marker_spacing: candidate markers are at least this far apart (metres) unless their
-            normals differ by more than ``normal_diff_deg``.
-        normal_diff_deg: normals differing by more than this (degrees) count as different.
-        tag_size: edge of the tag that must fit flat on the wall, metres.
-        tag_border: white border around the black square that must be flat too, as a fraction
-            of ``tag_size`` per side (0.25: the 2-bit quiet zone of the rendered 8-bit tag,
-            see :mod:`markerplace.tagfamily`).
-        flatness_tol: tag samples on one plane within this, metres.
-        max_normal_z: |n_z| of a candidate's surface normal must be below this (near-vertical).
-        scan_rays: rays per 360-degree range scan (candidate wall spots).
-        max_scan_range: range of a scan ray, metres.
         resolution: occupancy and floor-map cell size, metres (coarsened for huge models).
         slice_offsets: heights (metres, relative to the eye-level plane of the storey) of the
             cross-sections whose union blocks free space.
@@ -89,40 +86,61 @@ class DiscretizeConfig:
             with glassless windows lets far fewer out. 1.0 keeps every region.
         open_reach: length of those rays, metres.
         floor: how storeys and floors are found (:class:`~markerplace.plan.discretize.storeys.FloorConfig`).
-        allow: keys of :data:`~markerplace.plan.discretize.wall_candidates.ALLOWABLE` (``doors``,
-            ``furniture``, ``off-wall``, ...) whose surfaces may carry tags (``plan --allow``);
-            default none: walls and columns only.
+        candidates: where candidate markers may go (spacing, flatness, the scan, ``allow``:
+            :class:`~markerplace.plan.discretize.candidate_rules.CandidateConfig`).
     """
 
-    height: float = 1.5
-    level: int | None = None
-    start: tuple[float, float] | None = None
-    grid_spacing: float = 0.5
-    clearance: float = 0.3
-    num_yaws: int = 8
-    marker_spacing: float = 1.0
-    normal_diff_deg: float = 30.0
-    tag_size: float = 0.4
-    tag_border: float = 0.25
-    flatness_tol: float = 0.02
-    max_normal_z: float = 0.2
-    scan_rays: int = 720
-    max_scan_range: float = 10.0
+    height: float = setting(1.5, flag="--height", bounds=(0.1, 10.0), units="m",
+                            help="eye level (cameras and tag centres) above the local floor, metres",
+                            hint="the eye-level plane height above the floor in metres, e.g. 1.5")
+    level: int | None = setting(None, flag="--level", type=_parse_level, metavar="N|all", bounds=(0, 1000),
+                                integer=True, hint="a storey index, 0 = lowest", shown_default="all",
+                                help="storey to plan, 0 = lowest, or 'all' for every storey with one marker budget")
+    start: tuple[float, float] | None = setting(None, flag="--start", metavar="X,Y", convert=_parse_xy,
+                                                shown_default="every region of at least 2 m^2",
+                                                help="plan only the free region holding this point (user frame, "
+                                                     "metres)")
+    grid_spacing: float = setting(0.5, flag="--grid-spacing", bounds=(OCCUPANCY_CELL, 50.0), units="m",
+                                  help="camera grid spacing, metres (the paper used 0.5-0.7)",
+                                  hint=f"the camera grid spacing in metres, e.g. 0.5 (not finer than the "
+                                       f"{OCCUPANCY_CELL:g} m occupancy grid)")
+    clearance: float = setting(0.3, flag="--clearance", bounds=(0.0, 5.0), units="m",
+                               help="minimum distance of camera locations from obstacles, metres",
+                               hint="the distance of cameras from obstacles in metres, e.g. 0.3")
+    num_yaws: int = setting(8, flag="--yaws", bounds=(1, 360), help="camera yaws per location",
+                            hint="camera yaws per location, e.g. 8")
     resolution: float = 0.05
     slice_offsets: tuple[float, ...] = (-0.3, 0.0, 0.25)
     passage_radius: float = 0.2
     min_region_area: float = 2.0
-    max_open_fraction: float = 0.35
+    max_open_fraction: float = setting(0.35, flag="--keep-outdoors", const=1.0, bounds=(0.0, 1.0), shown_default="off",
+                                       help="also plan free regions open to the outside (a porch, a strip under "
+                                            "the eaves, a balcony; or a room whose glass walls the scan lost): by "
+                                            "default a region from which more than 35 % of eye-level views hit "
+                                            "nothing within 50 m is left out, and logged",
+                                       hint="a fraction in [0, 1], e.g. 0.35 (1 keeps every region)")
     open_reach: float = 50.0
     floor: FloorConfig = field(default_factory=FloorConfig)
-    allow: tuple[str, ...] = ()
+    candidates: CandidateConfig = field(default_factory=CandidateConfig)
 
-    def candidate_config(self) -> CandidateConfig:
-        return CandidateConfig(height=self.height, marker_spacing=self.marker_spacing,
-                               normal_diff_deg=self.normal_diff_deg, tag_size=self.tag_size,
-                               tag_border=self.tag_border, flatness_tol=self.flatness_tol,
-                               max_normal_z=self.max_normal_z, scan_rays=self.scan_rays,
-                               max_scan_range=self.max_scan_range, allow=tuple(self.allow))
+    def cache_view(self, tag_size: float) -> dict:
+        """What the discretization's cache key hashes: the settings as one flat dict, laid out as
+        before the candidate settings were nested (so the keys of existing run folders stay
+        valid), with ``tag_size`` (the placement's, metres); a candidate setting that was not a
+        field of the flat layout is added only when it differs from its default."""
+        flat = {f.name: config_dict(getattr(self, f.name)) for f in fields(self) if f.name != "candidates"}
+        default = CandidateConfig()
+        for f in fields(CandidateConfig):
+            value = getattr(self.candidates, f.name)
+            if f.name in _FLAT_CANDIDATE_FIELDS or value != getattr(default, f.name):
+                flat[f.name] = config_dict(value)
+        flat["tag_size"] = tag_size
+        return flat
+
+
+_FLAT_CANDIDATE_FIELDS = ("marker_spacing", "normal_diff_deg", "tag_border", "flatness_tol", "max_normal_z",
+                          "scan_rays", "max_scan_range", "allow")
+"""The candidate settings DiscretizeConfig held itself before they were nested."""
 
 
 def _grid_for(vertices: np.ndarray, cfg: DiscretizeConfig) -> Grid:
@@ -137,12 +155,15 @@ def _grid_for(vertices: np.ndarray, cfg: DiscretizeConfig) -> Grid:
     return grid
 
 
-def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discretization:
+def discretize(scene, config: DiscretizeConfig = DiscretizeConfig(),
+               tag_size: float = DEFAULT_TAG_SIZE) -> Discretization:
     """Feasible camera poses and candidate marker poses of ``scene`` (see the module docstring).
 
     Args:
         scene: a :class:`~markerplace.scene.types.Scene` (world z up, metres).
         config: settings.
+        tag_size: black-square edge of the tags that must fit flat on a wall, metres (the
+            placement's ``tag_size``).
 
     Returns:
         The :class:`Discretization`.
@@ -219,10 +240,10 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
 
     cand = wall_candidates(rc, SurfaceLabels.from_scene(scene), grid,
                            [(floor, space.free, np.column_stack([xy, z])) for _, floor, _, space, xy, z in spaces],
-                           cfg.candidate_config())
+                           cfg.candidates, height=cfg.height, tag_size=tag_size)
     if len(cand.position) == 0:
         raise UserError(f"no candidate marker poses: no flat near-vertical wall at eye level holds a "
-                        f"{cfg.tag_size:g} m tag ({_removed_words(cand.removed, cfg.tag_size)}); check "
+                        f"{tag_size:g} m tag ({_removed_words(cand.removed, tag_size)}); check "
                         "--height/--tag-size, or --allow what the spots are on")
 
     locations = np.concatenate([t[4] for t in spaces])
@@ -246,8 +267,8 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig()) -> Discreti
     summary["wall_spots_pass"] = r["pass"]
     summary["candidates_crowded"] = r["crowded"]
     summary["candidates_added"] = r["added"]
-    summary["allow"] = list(cfg.allow)
-    log.info("discretize: %s", candidate_arithmetic(summary, cfg.marker_spacing, cfg.tag_size, len(cT)))
+    summary["allow"] = list(cfg.candidates.allow)
+    log.info("discretize: %s", candidate_arithmetic(summary, cfg.candidates.marker_spacing, tag_size, len(cT)))
 
     if start is None:
         first = spaces[0]
@@ -370,17 +391,19 @@ def _storey_report(s: int, floor_z: float, grid: Grid, open_floor: np.ndarray, s
             "unreached": [{"area_m2": a, "centre": [float(v) for v in c]} for a, c in space.unreached]}
 
 
-def run_discretize(scene, config: DiscretizeConfig, run_dir: Path, timings: dict) -> tuple[Discretization, str]:
+def run_discretize(scene, config: DiscretizeConfig, tag_size: float, run_dir: Path,
+                   timings: dict) -> tuple[Discretization, str]:
     """The discretize stage of a run folder: ``run_dir/discretization.npz``, reused while the
-    scene (geometry, part names, glass) and ``config`` are unchanged.
+    scene (geometry, part names, glass), ``config`` and ``tag_size`` (the placement's
+    black-square edge, metres: the tag that must fit flat on a wall) are unchanged.
 
     Returns:
         (the discretization, the stage's cache key, which the later stages' keys include).
     """
     # the parts' names and glass decide which wall spots may carry a tag (discretize.wall_candidates)
     labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
-    key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config)
-    disc = cached("discretize", run_dir / "discretization.npz", key, lambda: discretize(scene, config),
+    key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.cache_view(tag_size))
+    disc = cached("discretize", run_dir / "discretization.npz", key, lambda: discretize(scene, config, tag_size),
                   save_discretization, load_discretization, timings)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",
              len(disc.locations), config.num_yaws, len(disc.world_from_cam), len(disc.candidate_world_from_marker))

@@ -58,6 +58,7 @@ from markerplace.plan.discretize.candidate_rules import (ALLOWABLE, GEOMETRIC, R
 from markerplace.plan.discretize.floorplan import StoreyFloor
 from markerplace.plan.discretize.grid import Grid
 from markerplace.scene.raycast import RayCaster
+from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.scene.semantics import CATEGORIES, PartKind
 
 log = logging.getLogger(__name__)
@@ -170,7 +171,7 @@ def _space_out(xy: np.ndarray, n2: np.ndarray, spacing: float, cos_diff: float,
 
 
 def _storey_spots(rc: RayCaster, grid: Grid, floor: StoreyFloor, free: np.ndarray, locations: np.ndarray,
-                  config: CandidateConfig):
+                  config: CandidateConfig, height: float):
     """Wall spots of one storey ordered along its perimeter: xy, n2, z, face, arclength, floor z, length."""
     from scipy.spatial import cKDTree
 
@@ -199,7 +200,7 @@ def _storey_spots(rc: RayCaster, grid: Grid, floor: StoreyFloor, free: np.ndarra
     order = np.lexsort((hxy[:, 1], hxy[:, 0], s))
     hxy, face, n2, front, s = hxy[order], face[order], n2[order], front[order], s[order]
     fz = grid.lookup(floor.height, front, np.nan)
-    z = fz + config.height
+    z = fz + height
     ok = np.isfinite(z)
     return hxy[ok], n2[ok], z[ok], face[ok], s[ok], fz[ok], per_len
 
@@ -216,7 +217,7 @@ def _surface_phrase(kind: PartKind, geometric: str | None, column: bool) -> str:
 
 
 def wall_candidates(rc: RayCaster, labels: SurfaceLabels | np.ndarray, grid: Grid, storeys: list,
-                    config: CandidateConfig) -> WallCandidates:
+                    config: CandidateConfig, height: float = 1.5, tag_size: float = DEFAULT_TAG_SIZE) -> WallCandidates:
     """Candidate marker poses of every storey (see the module docstring).
 
     Args:
@@ -228,6 +229,8 @@ def wall_candidates(rc: RayCaster, labels: SurfaceLabels | np.ndarray, grid: Gri
             :class:`~markerplace.plan.discretize.floorplan.StoreyFloor`, (H, W) bool free region and (L, 3)
             camera positions (eye level).
         config: settings.
+        height: tag centres above the local floor, metres (the discretization's eye level).
+        tag_size: black-square edge of the tag that must fit flat, metres.
     """
     if not isinstance(labels, SurfaceLabels):
         labels = SurfaceLabels.plain(labels)
@@ -249,7 +252,8 @@ def wall_candidates(rc: RayCaster, labels: SurfaceLabels | np.ndarray, grid: Gri
     geo_rules = [g for g in GEOMETRIC if g not in allow]
     for k, (floor, free, locations) in enumerate(storeys):
         xy, n2, z, face, s, fz, per_len = _storey_spots(rc, grid, floor, free,
-                                                       np.asarray(locations, float).reshape(-1, 3), config)
+                                                       np.asarray(locations, float).reshape(-1, 3), config,
+                                                       height)
         Pt = np.column_stack([xy, z])
         N = np.column_stack([n2, np.zeros(len(n2))])
         part = labels.face_part[face] if len(face) else np.zeros(0, np.int64)
@@ -268,7 +272,7 @@ def wall_candidates(rc: RayCaster, labels: SurfaceLabels | np.ndarray, grid: Gri
                     why[hit] = RULES.index(c)
                 go = np.flatnonzero(why == len(RULES))
                 if len(go):
-                    fits = tag_fits(rc, Pt[todo[go]], N[todo[go]], config, face_ok)
+                    fits = tag_fits(rc, Pt[todo[go]], N[todo[go]], config, face_ok, tag_size=tag_size)
                     why[go[~fits]] = RULES.index("does not fit")
                     go = go[fits]
                 unnamed = go[~named[p[go]]]

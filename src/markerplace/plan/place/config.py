@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from markerplace.markers import DEFAULT_TAG_SIZE
+from markerplace.plan.place.registry import PLACEMENT_METHODS
+from markerplace.plan.score.marker_models import MARKER_MODELS
+from markerplace.settings import SEED_MAX, setting
 
 CALIBRATION_POSES = ("map", "offgrid")
 """Images ``expected-recall`` may fit its success model on (``--calibration-poses``)."""
@@ -24,8 +27,7 @@ class PlacementConfig:
             ``paper`` (relative-pose factor, as published) or ``corners`` (projected tag
             corners; depends on distance, viewing angle and tag size).
         tag_size: black-square edge of the printed tags, metres: the one home of the tag size
-            (:class:`PlanConfig` derives ``discretize.tag_size``, the tag that must fit flat on
-            a wall, from it; the scoring and the placed markers use it too).
+            (the discretization's fit check, the scoring and the placed markers use it).
         similarity: down-weight look-alike points (the paper's similarity analysis).
         lazy: lazy greedy (exactly the same picks as plain greedy, far fewer evaluations).
         seed: seed of the randomized methods (random and uniform).
@@ -38,13 +40,31 @@ class PlacementConfig:
             map; :mod:`markerplace.testbed.calibration`).
     """
 
-    k: int = 20
-    method: str = "omp"
-    v: float = 90.0
-    marker_model: str = "paper"
-    tag_size: float = DEFAULT_TAG_SIZE
-    similarity: bool = True
+    k: int = setting(20, flag="-k", bounds=(1, 10_000), commands=("plan",), help="number of markers to place",
+                     doc="number of markers", hint="the number of markers to place, e.g. 20")
+    method: str = setting("omp", flag="--method", choices=lambda: PLACEMENT_METHODS.names(), commands=("plan",),
+                          help=lambda: f"placement method: {PLACEMENT_METHODS.help()}",
+                          doc=lambda: "a registered placement method: " + ", ".join(
+                              f"`{n}`" + (f" ({c.summary})" if getattr(c, "summary", "") else "")
+                              for n, c in PLACEMENT_METHODS.items()))
+    v: float = setting(90.0, flag="-v", bounds=(0.0, 100.0), units="%", hint="a percentage such as 90",
+                       help="OMP percentile parameter v in [0, 100]: the most visible v % of candidates compete "
+                            "(q is derived from v as in the paper)")
+    marker_model: str = setting("paper", flag="--marker-model", choices=lambda: MARKER_MODELS.names(),
+                                help=lambda: f"marker information model: {MARKER_MODELS.help()}")
+    tag_size: float = setting(DEFAULT_TAG_SIZE, flag="--tag-size", bounds=(0.02, 3.0), units="m",
+                              hint="the black-square edge in metres, e.g. 0.4",
+                              help="black-square edge of the printed tags, metres; the one tag size (the "
+                                   "discretization's fit check uses it too)")
+    similarity: bool = setting(True, flag="--no-similarity", const=False,
+                               help="turn the look-alike (similarity) analysis off (no down-weighting of repeated "
+                                    "features)")
     lazy: bool = True
-    seed: int = 0
+    seed: int = setting(0, flag="--placement-seed", bounds=(0, SEED_MAX), hint=f"a seed in 0..{SEED_MAX}, e.g. 0",
+                        help=lambda: "seed of the " + "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
+                        + " placements")
     first_tag_id: int = 0
-    calibration_poses: str = "map"
+    calibration_poses: str = setting("map", flag="--calibration-poses", choices=lambda: CALIBRATION_POSES,
+                                     help="images expected-recall fits its success model on: map (the map images, "
+                                          "each without its own location) or offgrid (1000 test-like renders "
+                                          "between the map poses, never test images)")

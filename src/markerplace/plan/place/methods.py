@@ -34,7 +34,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from markerplace.registry import Registry, configure
+from markerplace.plan.place.registry import PLACEMENT_METHODS
+from markerplace.registry import configure
 from markerplace.plan.place.human import HumanConfig, human_placement
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
@@ -43,8 +44,6 @@ from markerplace.plan.types import PlanData
 
 log = logging.getLogger(__name__)
 
-#: Every placement method by name, in registration order (``--method``, ``--methods``).
-PLACEMENT_METHODS = Registry("placement method", "--method")
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,117 @@
+"""The bounds of every numeric command-line option, and :func:`check_args`, which applies them.
+
+The bounds of options that set a config field live on the field
+(:func:`markerplace.settings.setting`); this module gathers them per subcommand (:data:`BOUNDS`,
+built on first use) next to the hand-written ones of the other options
+(:mod:`markerplace.validation`), and gives the field bounds their old names (``GRID_SPACING``,
+``EVAL_K``, ...). :func:`check_args` is called once by :func:`markerplace.cli.main.main` for every
+subcommand: one-line :class:`~markerplace.errors.UserError`, exit code 2.
+"""
+
+from __future__ import annotations
+
+from markerplace.errors import UserError
+from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, HFOV, IMAGE_HEIGHT, IMAGE_WIDTH,
+                                    MATCH_RADIUS, MAX_DT, SEED, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats,
+                                    parse_int_list)
+
+__all__ = ["BOUNDS", "check_args", "command_name", "field_bound"]
+
+_SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
+
+_FIELD_BOUNDS = {
+    "K": ("plan", "placement.k"), "V": ("plan", "placement.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
+    "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
+    "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
+    "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
+    "MARKER_SPACING": ("plan", "discretize.candidates.marker_spacing"), "WORKERS": ("plan", "runtime.workers"),
+    "TESTS": ("evaluate", "test.tests"), "RUNS": ("evaluate", "study.runs"), "EVAL_K": ("evaluate", "study.ks"),
+    "TAG_SCALE": ("evaluate", "study.tag_scale"), "SHIFT": ("evaluate", "study.shift"),
+    "TEST_SEED": ("evaluate", "test.seed"),
+}
+"""Bounds of config fields, by their old names here: each is built from its field's
+:func:`~markerplace.settings.setting` (the one home of the bound)."""
+
+
+def _configs() -> dict:
+    """The root configs of ``plan`` and ``evaluate`` (defaults), imported when first needed."""
+    from markerplace.plan.config import PlanConfig
+    from markerplace.testbed.config import EvaluateConfig
+
+    return {"plan": PlanConfig(), "evaluate": EvaluateConfig()}
+
+
+def field_bound(root: str, path: str) -> Bound:
+    """The :class:`Bound` of the config field ``path`` of ``root`` (``plan``/``evaluate``)."""
+    from markerplace.settings import walk
+
+    leaf = next(leaf for leaf in walk(_configs()[root]) if leaf.path == path)
+    return leaf.setting.bound()
+
+
+_BOUNDS: dict[str, dict[str, Bound]] = {}
+
+
+def _bounds() -> dict[str, dict[str, Bound]]:
+    """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
+    pixels, ``plan --height`` metres); the options of config fields come from the fields.
+    Comma-separated options are parsed by :func:`parse_floats` / :func:`parse_int_list` and
+    checked there."""
+    if not _BOUNDS:
+        from markerplace.settings import bounds_by_dest
+
+        configs = _configs()
+        plan = {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "evaluate")}
+        evaluate = bounds_by_dest(configs["evaluate"], "evaluate")
+        _BOUNDS.update({
+            "scene export": {"seed": SEED, "voxel": VOXEL},
+            "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
+            "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
+            "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan")},
+            "evaluate": {**plan, **evaluate},
+            "study": {**plan, "tests": evaluate["tests"], "test_seed": evaluate["test_seed"]},
+            "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
+        })
+    return _BOUNDS
+
+
+def __getattr__(name: str):
+    """``BOUNDS`` and the bounds of config fields (:data:`_FIELD_BOUNDS`), built on first use."""
+    if name == "BOUNDS":
+        return _bounds()
+    if name in _FIELD_BOUNDS:
+        return field_bound(*_FIELD_BOUNDS[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def command_name(args) -> str:
+    """``"plan"``, ``"render"``, ``"evaluate"``, ``"scene export"``, ... of a parsed command line."""
+    name = getattr(args, "command", None) or ""
+    if name == "scene":
+        name = f"scene {getattr(args, 'scene_command', '') or ''}".strip()
+    return name
+
+
+def check_args(args) -> None:
+    """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
+    default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
+    ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
+    with it). Whether a scheduler answers is checked once the output paths are
+    (:func:`markerplace.runtime.cluster.check_scheduler`)."""
+    for dest, bound in _bounds().get(command_name(args), {}).items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            bound.check(value)
+    if getattr(args, "pose", None) is not None:
+        parse_floats(args.pose, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
+    if getattr(args, "start", None) is not None:
+        parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
+    if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
+        parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks"))
+    if getattr(args, "cluster", None) is not None:
+        from markerplace.runtime.cluster import parse_cluster
+
+        parse_cluster(args.cluster)
+        if getattr(args, "workers", 0):
+            raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "
+                            "workers do the work (give their number in local:N); leave --workers out")
