@@ -85,6 +85,15 @@ def test_the_checker_finds_package_and_type_checking_cycles(tmp_path, layout):
     assert layout.cycles(graph) == [] and layout.package_cycles(graph) == []  # plan -> report only
 
 
+def test_imports_at_module_level_except_heavy_optional_ones(layout):
+    """Every dependency is visible at the top of a module; only the documented heavy optional
+    third-party modules (``HEAVY_OPTIONAL``) may be imported inside a function."""
+    found = layout.deferred_imports()
+    assert not found, "imports inside functions (move them to module level): " + "; ".join(
+        f"{m}:{line}: {mod}" for m, line, mod in found[:20])
+    assert all(name.split(".")[0] != "markerplace" for name in layout.HEAVY_OPTIONAL)
+
+
 def test_no_module_over_the_limit(layout):
     sizes = layout.line_counts()
     over = {m: n for m, n in sizes.items() if n > MAX_LINES and m not in ALLOWED_OVER}

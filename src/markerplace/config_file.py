@@ -36,6 +36,7 @@ from typing import Any
 
 from markerplace.errors import UserError
 from markerplace.settings import NO_CONST, Leaf, apply, walk
+from markerplace.jsonfile import read_json
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +83,6 @@ def read_config_file(path: str | Path, base: Any) -> Any:
         except OSError as err:
             raise UserError(f"{what}: cannot read it ({err.strerror or err})") from None
     elif path.suffix.lower() == ".json":
-        from markerplace.jsonfile import read_json
-
         data = read_json(path, what)
         if not isinstance(data, dict):
             raise UserError(f"{what} is not a JSON object of settings: give a plan's config.json")

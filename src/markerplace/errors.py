@@ -5,6 +5,9 @@ one-line message that says what is wrong and how to fix it. The CLI prints it on
 exits with code 2; it never shows a traceback for these.
 """
 
+import errno
+import os
+
 
 class UserError(Exception):
     """An error caused by input the user can fix. ``str(err)`` is a one-line message."""
@@ -18,9 +21,6 @@ class UserError(Exception):
 def write_error(path, err: OSError) -> Exception:
     """A :class:`UserError` (one line) for a write that failed on a full disk, a quota, a
     read-only file system or a permission; ``err`` itself for any other error."""
-    import errno
-    import os
-
     if err.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
         return err
     hint = "free some space" if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else "make it writable"

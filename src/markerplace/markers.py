@@ -17,6 +17,10 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.runtime.atomic_io import clean_array
 from markerplace.geometry import marker_corners_local, transform_points, world_from_marker_pose
+from markerplace.jsonfile import read_json
+from markerplace.scene.raycast import RayCaster
+from markerplace.scene.worldframe import points_to_user, world_offset
+from markerplace.tagfamily import NUM_TAGS
 
 FAMILY = "tag36h11"
 DEFAULT_TAG_SIZE = 0.4
@@ -71,8 +75,6 @@ and 6-digit exports stay far below it; a scaled, sheared or mirrored matrix does
 def check_tag_id(value, where: str = "tag_id") -> int:
     """``value`` as a tag36h11 id: a JSON integer (not ``true``, ``1.5``, ``"3"`` or ``1e30``) in
     0..586. Raises :class:`UserError` naming ``where``."""
-    from markerplace.tagfamily import NUM_TAGS
-
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise UserError(f"{where} {_short(value)} is not an integer: give a "
                         f"{FAMILY} id, 0..{NUM_TAGS - 1}")
@@ -179,8 +181,6 @@ def load_markers(path: str | Path, option: str | None = None,
         option: how the user gave it (``"--existing"``), for messages; default "marker file".
         default_size: black-square edge (metres) of entries without ``size``.
     """
-    from markerplace.jsonfile import read_json
-
     path = Path(path)
     what = f"{option} {path}" if option else f"marker file {path}"
     data = read_json(path, what)
@@ -205,8 +205,6 @@ def load_markers(path: str | Path, option: str | None = None,
 def check_tag_budget(k: int, existing: list[Marker], first_tag_id: int = 0) -> None:
     """Refuse a plan whose ``k`` new tags cannot get ids of their own in tag36h11 next to the
     ``existing`` ones (placed ids count up from ``first_tag_id``, skipping existing ids)."""
-    from markerplace.tagfamily import NUM_TAGS
-
     free = NUM_TAGS - first_tag_id - sum(1 for m in existing if m.tag_id >= first_tag_id)
     if k > free:
         raise UserError(f"-k {k}: {FAMILY} has {NUM_TAGS} ids and {len(existing)} are taken by existing tags, so at most "
@@ -237,8 +235,6 @@ def check_markers_on_walls(scene, markers, source: str = "markers", tolerance: f
     """
     if not markers:
         return
-    from markerplace.scene.raycast import RayCaster
-    from markerplace.scene.worldframe import points_to_user, world_offset
 
     P = np.array([m.position for m in markers], dtype=float).reshape(-1, 3)
     N = np.array([m.normal for m in markers], dtype=float).reshape(-1, 3)

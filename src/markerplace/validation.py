@@ -26,6 +26,9 @@ from typing import Any, Sequence
 from markerplace.errors import UserError
 
 from markerplace.settings import OCCUPANCY_CELL, SEED_MAX, Bound  # noqa: F401 (re-exported)
+import argparse
+import numpy as np
+from markerplace.settings import check_bounds
 
 UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
 SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)
@@ -45,8 +48,6 @@ MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e
 def parse_level(text: str):
     """``--level``: ``all`` (None) or a storey index >= 0 (argparse type: raises
     :class:`argparse.ArgumentTypeError`)."""
-    import argparse
-
     if str(text).strip().lower() == "all":
         return None
     try:
@@ -122,8 +123,6 @@ def parse_float_list(text: str, option: str, bound: Bound) -> tuple[float, ...]:
 def check_plan_config(config) -> None:
     """Numeric settings of a :class:`~markerplace.plan.config.PlanConfig`: every bounded field
     (the same bounds as the command line, :func:`markerplace.settings.check_bounds`)."""
-    from markerplace.settings import check_bounds
-
     check_bounds(config)
     d = config.discretize
     if d.start is not None:
@@ -134,8 +133,6 @@ def check_plan_config(config) -> None:
 
 def check_evaluate_config(config) -> None:
     """Numeric settings of an :class:`~markerplace.testbed.config.EvaluateConfig`."""
-    from markerplace.settings import check_bounds
-
     if not config.study.ks:
         raise UserError("--k is empty: give positive marker counts, e.g. 5,10,15,20")
     check_bounds(config)
@@ -147,8 +144,6 @@ def check_evaluate_config(config) -> None:
 def check_pose_in_scene(scene, position, offset=(0.0, 0.0, 0.0), margin: float = 0.0) -> None:
     """Refuse a camera position (internal frame, metres) outside the model's bounding box
     (grown by ``margin``); the message gives the box in the user's frame (+ ``offset``)."""
-    import numpy as np
-
     lo, hi = scene.bounds
     p = np.asarray(position, dtype=float)
     if np.all(p >= lo - margin) and np.all(p <= hi + margin):
@@ -162,8 +157,6 @@ def check_pose_in_scene(scene, position, offset=(0.0, 0.0, 0.0), margin: float =
 
 def check_render_sees_something(result, pose_text: str | None) -> None:
     """Refuse a render in which no pixel hit the model (an all-black image, depth 0)."""
-    import numpy as np
-
     depth = getattr(result, "depth", None)
     if depth is not None and not np.any(np.asarray(depth) > 0):
         where = f"--pose {pose_text}" if pose_text else "the default pose"

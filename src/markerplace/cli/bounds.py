@@ -14,6 +14,10 @@ from markerplace.errors import UserError
 from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, HFOV, IMAGE_HEIGHT, IMAGE_WIDTH,
                                     MATCH_RADIUS, MAX_DT, SEED, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats,
                                     parse_int_list)
+from markerplace.plan.config import PlanConfig
+from markerplace.runtime.cluster import parse_cluster
+from markerplace.settings import bounds_by_dest, walk
+from markerplace.testbed.config import EvaluateConfig
 
 __all__ = ["BOUNDS", "check_args", "command_name", "field_bound"]
 
@@ -35,16 +39,11 @@ _FIELD_BOUNDS = {
 
 def _configs() -> dict:
     """The root configs of ``plan`` and ``evaluate`` (defaults), imported when first needed."""
-    from markerplace.plan.config import PlanConfig
-    from markerplace.testbed.config import EvaluateConfig
-
     return {"plan": PlanConfig(), "evaluate": EvaluateConfig()}
 
 
 def field_bound(root: str, path: str) -> Bound:
     """The :class:`Bound` of the config field ``path`` of ``root`` (``plan``/``evaluate``)."""
-    from markerplace.settings import walk
-
     leaf = next(leaf for leaf in walk(_configs()[root]) if leaf.path == path)
     return leaf.setting.bound()
 
@@ -58,8 +57,6 @@ def _bounds() -> dict[str, dict[str, Bound]]:
     Comma-separated options are parsed by :func:`parse_floats` / :func:`parse_int_list` and
     checked there."""
     if not _BOUNDS:
-        from markerplace.settings import bounds_by_dest
-
         configs = _configs()
         plan = {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "evaluate")}
         evaluate = bounds_by_dest(configs["evaluate"], "evaluate")
@@ -109,8 +106,6 @@ def check_args(args) -> None:
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks"))
     if getattr(args, "cluster", None) is not None:
-        from markerplace.runtime.cluster import parse_cluster
-
         parse_cluster(args.cluster)
         if getattr(args, "workers", 0):
             raise UserError(f"--workers {args.workers} has no effect with --cluster {args.cluster}: the cluster's "

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 
 from markerplace.pipelines.check import run_check
+from markerplace.cli.options import add_adopt_arg
+from markerplace.plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -17,8 +19,6 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def add_check_parser(sub) -> argparse.ArgumentParser:
     """Add ``check`` to the CLI's subparsers."""
-    from markerplace.plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
-
     p = sub.add_parser(
         "check", help="compare the tags as installed (measured) with a plan: shifts, score lost, where it hurts",
         description="After the tags went up, give their measured poses (--installed: placement.json's format, or a "
@@ -35,7 +35,6 @@ def add_check_parser(sub) -> argparse.ArgumentParser:
                    help=f"an installed tag farther than this from a planned spot is not that spot's tag, metres "
                         f"(default {MATCH_RADIUS_M:g})")
     p.add_argument("--workers", type=int, default=1, help="processes for the depth renders (default 1: this process)")
-    from markerplace.cli.options import add_adopt_arg
 
     add_adopt_arg(p)  # PLAN_DIR from an older markerplace, or an --out folder it did not make
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")

@@ -12,6 +12,11 @@ from markerplace.cli.options import plan_config_for_budgets
 from markerplace.pipelines.evaluate import RunInputs, evaluate
 from markerplace.scene.spec import SceneSpec
 from markerplace.testbed.config import validate_evaluate_config
+from dataclasses import replace
+from markerplace.cli.options import add_plan_args, add_scene_args
+from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.settings import add_setting_args, apply, values_from_args
+from markerplace.testbed.config import EvaluateConfig
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -20,11 +25,6 @@ def evaluate_config_from_args(args: argparse.Namespace):
     """Build an :class:`~markerplace.testbed.config.EvaluateConfig` from parsed ``evaluate``
     arguments: an option per config field (:mod:`markerplace.settings`), ``seed`` from the
     scene's ``--seed``."""
-    from dataclasses import replace
-
-    from markerplace.settings import apply, values_from_args
-    from markerplace.testbed.config import EvaluateConfig
-
     config = EvaluateConfig()
     return replace(apply(config, values_from_args(args, config, "evaluate")), seed=args.seed)
 
@@ -47,11 +47,6 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``evaluate`` subcommand (with its handler) to ``subparsers``."""
-    from markerplace.plan.place.methods import PLACEMENT_METHODS
-    from markerplace.settings import add_setting_args
-    from markerplace.testbed.config import EvaluateConfig
-    from markerplace.cli.options import add_plan_args, add_scene_args
-
     methods = ", ".join(f"{name} = {cls.label or name}" for name, cls in PLACEMENT_METHODS.items())
 
     p = subparsers.add_parser(

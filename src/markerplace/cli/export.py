@@ -9,15 +9,14 @@ import logging
 from pathlib import Path
 
 from markerplace.errors import UserError
+from markerplace.output_checks import check_output_file
+from markerplace.plan.folder import read_plan_folder
+from markerplace.report.tagged_export import export_plan_glb
 
 log = logging.getLogger("markerplace.cli.main")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from markerplace.output_checks import check_output_file
-    from markerplace.plan.folder import read_plan_folder
-    from markerplace.report.tagged_export import export_plan_glb
-
     if Path(args.gltf).suffix.lower() != ".glb":
         raise UserError(f"--gltf {args.gltf!r} must end in .glb (binary glTF with the textures inside)")
     folder = read_plan_folder(args.plan_dir)

@@ -19,19 +19,36 @@ from markerplace.log import setup_logging
 from markerplace.pipelines.plan import PlanInputs, run_plan
 from markerplace.scene.spec import SceneSpec
 from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_from_args
+import numpy as np
+from markerplace.cli.bounds import check_args
+from markerplace.cli.check import add_check_parser
+from markerplace.cli.evaluate import add_evaluate_parser
+from markerplace.cli.export import add_export_parser
+from markerplace.cli.scan import add_scan_parsers
+from markerplace.cli.study import add_study_parser
+from markerplace.geometry import Intrinsics, world_from_cam_pose
+from markerplace.markers import load_markers
+from markerplace.output_checks import check_output_file
+from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.render.renderer import Renderer
+from markerplace.render.views import default_pose, write_render_outputs
+from markerplace.report.sheets import PAPER_CHOICES
+from markerplace.runtime.interrupt import InterruptGuard
+from markerplace.runtime.run_folder import close_all
+from markerplace.scene import load_scene
+from markerplace.scene.builtin.catalogue import list_scenes
+from markerplace.scene.export import export_glb
+from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
+from markerplace.validation import COORDINATE, YAW_DEG, check_pose_in_scene, check_render_sees_something, parse_floats
 
 log = logging.getLogger("markerplace.cli.main")
 
 
 def _parse_pose(text: str):
-    from markerplace.validation import COORDINATE, YAW_DEG, parse_floats
-
     return parse_floats(text, "--pose", ("X", "Y", "Z", "YAW_DEG"), (COORDINATE, COORDINATE, COORDINATE, YAW_DEG))
 
 
 def cmd_scene_list(args: argparse.Namespace) -> int:
-    from markerplace.scene.builtin.catalogue import list_scenes
-
     rows = list_scenes()
     print(f"{'name':<10} {'floor area (m^2)':>16} {'rooms':>6}  description")
     for r in rows:
@@ -40,10 +57,6 @@ def cmd_scene_list(args: argparse.Namespace) -> int:
 
 
 def cmd_scene_export(args: argparse.Namespace) -> int:
-    from markerplace.scene import load_scene
-    from markerplace.output_checks import check_output_file
-    from markerplace.scene.export import export_glb
-
     check_output_file(args.out, "scene export OUT")
     if Path(args.out).suffix.lower() != ".glb":
         raise UserError(f"scene export OUT {args.out!r} must end in .glb (binary glTF with the textures inside; "
@@ -55,17 +68,6 @@ def cmd_scene_export(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from markerplace.geometry import Intrinsics, world_from_cam_pose
-    from markerplace.markers import load_markers
-    from markerplace.render.renderer import Renderer
-    from markerplace.render.views import default_pose, write_render_outputs
-    from markerplace.scene import load_scene
-    from markerplace.output_checks import check_output_file
-    from markerplace.validation import check_pose_in_scene, check_render_sees_something
-    from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
-
     pose = _parse_pose(args.pose) if args.pose else None
     check_output_file(args.out, "--out", ("_rgb.png", "_depth.npy", "_normal.png"))
     user_markers = load_markers(args.markers, "--markers") if args.markers else []
@@ -143,7 +145,6 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p_render.set_defaults(func=cmd_render)
 
-    from markerplace.plan.place.methods import PLACEMENT_METHODS
 
     p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
     add_scene_args(p_plan)
@@ -157,7 +158,6 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
                              "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
                              "placing, so a re-run reuses every cached stage (see docs/cli.md)")
-    from markerplace.report.sheets import PAPER_CHOICES
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "
@@ -165,18 +165,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 
-    from markerplace.cli.evaluate import add_evaluate_parser
 
     add_evaluate_parser(sub)
 
-    from markerplace.cli.scan import add_scan_parsers
 
     add_scan_parsers(sub, p_export)  # `fuse` and `scene export ... --as-scan`
 
-    from markerplace.cli.check import add_check_parser
-    from markerplace.cli.export import add_export_parser
 
-    from markerplace.cli.study import add_study_parser
 
     add_study_parser(sub)  # `study SCENE --out DIR`
     add_export_parser(sub)  # `export PLAN_DIR --gltf OUT.glb`
@@ -211,8 +206,6 @@ RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    from markerplace.runtime.interrupt import InterruptGuard
-
     with InterruptGuard() as guard:
         try:
             parser = build_parser()
@@ -226,7 +219,6 @@ def main(argv: list[str] | None = None) -> int:
                     parser.parse_args(["scene", "--help"])
                 parser.print_help()
                 return 2
-            from markerplace.cli.bounds import check_args
 
             check_args(args)  # every numeric option of every subcommand: finite and in range
             try:
@@ -235,8 +227,6 @@ def main(argv: list[str] | None = None) -> int:
                     return guard.stopped(KeyboardInterrupt())
                 return code
             finally:
-                from markerplace.runtime.run_folder import close_all
-
                 close_all()  # unlock the run folders; one the run wrote nothing into is left as found
         except UserError as err:
             print(f"markerplace: error: {err}", file=sys.stderr)

@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import argparse
 import re
+from markerplace.cli.main import build_parser
+from markerplace.plan.config import PlanConfig
+from markerplace.settings import RUN_OPTIONS, flagged, shown_default
+from markerplace.testbed.config import EvaluateConfig
 
 __all__ = ["option_table", "rewrite", "COMMANDS"]
 
@@ -26,20 +30,13 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
 
 
 def _configs(command: str) -> list:
-    from markerplace.plan.config import PlanConfig
-
     if command == "evaluate":
-        from markerplace.testbed.config import EvaluateConfig
-
         return [EvaluateConfig(), PlanConfig()]
     return [PlanConfig()]
 
 
 def _rows(command: str) -> list[tuple[str, str, str]]:
     """(option, default, meaning) of every option of ``command`` in parser order."""
-    from markerplace.cli.main import build_parser
-    from markerplace.settings import RUN_OPTIONS, flagged, shown_default
-
     leaves = {leaf.setting.flag: leaf for config in _configs(command) for leaf in flagged(config, command)}
     rows = []
     for action in _subparser(build_parser(), command)._actions:

@@ -15,6 +15,12 @@ import logging
 from typing import Sequence
 
 from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
+from dataclasses import replace
+from markerplace.config_file import read_config_file
+from markerplace.markers import check_tag_budget
+from markerplace.plan.config import PlanConfig
+from markerplace.plan.discretize.candidate_rules import parse_allow as parse
+from markerplace.settings import add_setting_args, apply, values_from_args
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +39,6 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
 
 def parse_allow(text: str | None) -> tuple[str, ...]:
     """``--allow`` (:func:`markerplace.plan.discretize.candidate_rules.parse_allow`)."""
-    from markerplace.plan.discretize.candidate_rules import parse_allow as parse
-
     return parse(text)
 
 
@@ -42,13 +46,8 @@ def plan_config_from_args(args: argparse.Namespace):
     """Build a :class:`~markerplace.plan.config.PlanConfig` from ``plan``/``evaluate``/``study``
     arguments: the defaults, then ``--config FILE`` (``plan``; :mod:`markerplace.config_file`),
     then every option of a config field that was given (:mod:`markerplace.settings`)."""
-    from markerplace.plan.config import PlanConfig
-    from markerplace.settings import apply, values_from_args
-
     config = PlanConfig()
     if getattr(args, "config", None):
-        from markerplace.config_file import read_config_file
-
         config = read_config_file(args.config, config)
     return apply(config, values_from_args(args, config, getattr(args, "command", None) or "plan"))
 
@@ -60,10 +59,6 @@ def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
     places ``max(ks)`` markers and the smaller budgets are evaluated on their own placements or
     prefixes. ``args`` is not changed.
     """
-    from dataclasses import replace
-
-    from markerplace.markers import check_tag_budget
-
     check_tag_budget(max(ks), [])  # placements get ids 0..k-1
     config = plan_config_from_args(args)
     return replace(config, placement=replace(config.placement, k=max(ks)))
@@ -74,9 +69,6 @@ def add_plan_args(p: argparse.ArgumentParser, command: str = "plan") -> None:
     :class:`~markerplace.plan.config.PlanConfig` that has a flag (discretization, scoring,
     placement, runtime; :func:`markerplace.settings.add_setting_args`), then the run options
     ``--force``, ``--adopt`` and ``--quiet``."""
-    from markerplace.plan.config import PlanConfig
-    from markerplace.settings import add_setting_args
-
     disc = p.add_argument_group("discretization")
     placing = p.add_argument_group("scoring and placement")
     add_setting_args(p, PlanConfig(), command, {"discretize": disc, "placement": placing, "runtime": placing})

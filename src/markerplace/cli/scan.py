@@ -14,6 +14,12 @@ from dataclasses import replace
 from pathlib import Path
 
 from markerplace.errors import UserError
+from markerplace.output_checks import check_output_file
+from markerplace.scan.frames import open_frameset
+from markerplace.scan.fuse import FuseConfig, fuse_frameset, parse_trunc, write_mesh_ply
+from markerplace.scan.simulate import ScanConfig, simulate_scan
+from markerplace.scene import load_scene
+from markerplace.scene.builtin.catalogue import builtin_names
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -28,15 +34,12 @@ def _check_ply(out: str, option: str) -> Path:
     path = Path(out)
     if path.suffix.lower() != ".ply":
         raise UserError(f"{option} {out!r} must end in .ply (the fused mesh is written as binary PLY)")
-    from markerplace.output_checks import check_output_file
 
     return check_output_file(path, option)  # a folder, a file above it, no write: before the minutes of fusion
 
 
 def fuse_config_from_args(args: argparse.Namespace):
     """:class:`~markerplace.scan.fuse.FuseConfig` from ``fuse`` arguments (validated)."""
-    from markerplace.scan.fuse import FuseConfig, parse_trunc
-
     trunc_m, trunc_voxels = parse_trunc(args.trunc)
     config = FuseConfig(voxel=args.voxel, trunc_m=trunc_m, trunc_voxels=trunc_voxels, depth_max=args.depth_max,
                         every=args.every)
@@ -46,9 +49,6 @@ def fuse_config_from_args(args: argparse.Namespace):
 
 def cmd_fuse(args: argparse.Namespace) -> int:
     """``markerplace fuse FRAMES_DIR --out MESH.ply``."""
-    from markerplace.scan.frames import open_frameset
-    from markerplace.scan.fuse import fuse_frameset, write_mesh_ply
-
     out = _check_ply(args.out, "--out")
     config = fuse_config_from_args(args)
     if args.max_dt <= 0:
@@ -64,11 +64,6 @@ def cmd_fuse(args: argparse.Namespace) -> int:
 
 def cmd_scene_export_scan(args: argparse.Namespace) -> int:
     """``markerplace scene export NAME OUT.ply --as-scan [--voxel V] [--keep-frames DIR]``."""
-    from markerplace.scene import load_scene
-    from markerplace.scene.builtin.catalogue import builtin_names
-    from markerplace.scan.fuse import write_mesh_ply
-    from markerplace.scan.simulate import ScanConfig, simulate_scan
-
     name = str(args.name).strip().lower()
     if name not in builtin_names():
         raise UserError(f"--as-scan works on built-in scenes only ({', '.join(builtin_names())}), not {args.name!r}")

@@ -5,6 +5,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+from markerplace.cli.bounds import EVAL_K, SHIFT, TAG_SCALE, V
+from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_for_budgets
+from markerplace.pipelines.evaluate import RunInputs, open_evaluation_folder
+from markerplace.pipelines.study import StudyPlan, run_study
+from markerplace.plan.config import validate
+from markerplace.scene.spec import SceneSpec
+from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
+from markerplace.validation import parse_float_list, parse_int_list
 
 log = logging.getLogger(__name__)
 
@@ -13,15 +21,6 @@ __all__ = ["add_study_parser"]
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``markerplace study``: prints the study's tables."""
-    from markerplace.pipelines.evaluate import RunInputs, open_evaluation_folder
-    from markerplace.plan.config import validate
-    from markerplace.scene.spec import SceneSpec
-    from markerplace.testbed.config import EvaluateConfig, StudyConfig, TestSetConfig, validate_evaluate_config
-    from markerplace.pipelines.study import StudyPlan, run_study
-    from markerplace.cli.bounds import EVAL_K, SHIFT, TAG_SCALE, V
-    from markerplace.validation import parse_float_list, parse_int_list
-    from markerplace.cli.options import plan_config_for_budgets
-
     ks = parse_int_list(args.k, "--k", EVAL_K)
     config = EvaluateConfig(test=TestSetConfig(tests=args.tests, seed=args.test_seed),
                             study=StudyConfig(methods=("none", "omp"), ks=ks), seed=args.seed)
@@ -43,8 +42,6 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 def add_study_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``study`` subcommand (with its handler) to ``subparsers``."""
-    from markerplace.cli.options import add_plan_args, add_scene_args
-
     p = subparsers.add_parser(
         "study", help="the paper's parameter study (Table II: v, tag detection, test data, similarity) and "
                       "sensitivity study (tags shifted, printed smaller or larger) of one scene",

@@ -21,6 +21,10 @@ from markerplace.markers import Marker
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import ImageFeatures
 from markerplace.imaging.visibility import markers_in_view, markers_unoccluded
+from markerplace.localization.tags import detect_tags
+from markerplace.render.renderer import Renderer
+from markerplace.runtime.cache import hash_of
+from markerplace.runtime.executor import WorkerJob
 
 __all__ = ["EngineSpec", "ImagingEngine", "imaging_job", "marker_key"]
 
@@ -52,8 +56,6 @@ class ImagingEngine:
     """A worker's imaging state (see the module docstring)."""
 
     def __init__(self, spec: EngineSpec):
-        from markerplace.render.renderer import Renderer
-
         self.spec = spec
         self.config = spec.config
         self.K = spec.config.camera.K
@@ -82,8 +84,6 @@ class ImagingEngine:
         ids = np.zeros(0, np.int32)
         corners = np.zeros((0, 4, 2), np.float32)
         if tags:
-            from markerplace.localization.tags import detect_tags
-
             dets = detect_tags(result.rgb)
             ids = np.array([d.tag_id for d in dets], dtype=np.int32)
             corners = np.array([np.asarray(d.corners, np.float32).reshape(4, 2) for d in dets],
@@ -118,8 +118,5 @@ def _close(engine: ImagingEngine) -> None:
 
 def imaging_job(spec: EngineSpec):
     """The executor job whose worker state is an :class:`ImagingEngine` for ``spec``."""
-    from markerplace.runtime.cache import hash_of
-    from markerplace.runtime.executor import WorkerJob
-
     key = hash_of("imaging-engine", repr(spec.scene), spec.config, sorted(spec.samples.items()))
     return WorkerJob(_build, spec, key, _close)

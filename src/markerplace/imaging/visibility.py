@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from markerplace.geometry import project_with_depth_lookup
+from markerplace.tagfamily import outer_size
 
 __all__ = ["marker_points", "markers_unoccluded", "markers_in_view"]
 
@@ -31,8 +32,6 @@ def marker_points(world_from_marker: np.ndarray, sizes, grid: int | None = None)
         grid: None: the centre and the 4 black-square corners (S = 5); an integer g: a g x g
             grid over the drawn quad including the white quiet zone (S = g^2).
     """
-    from markerplace.tagfamily import outer_size
-
     T = np.asarray(world_from_marker, dtype=float).reshape(-1, 4, 4)
     M = len(T)
     size = np.broadcast_to(np.asarray(sizes, dtype=float), (M,))

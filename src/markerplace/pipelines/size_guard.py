@@ -33,6 +33,11 @@ from markerplace.plan.discretize.stage import discretize
 from markerplace.scene.worldframe import points_to_internal, world_offset
 from markerplace.progress import format_duration
 from markerplace.validation import OCCUPANCY_CELL
+import time
+import numpy as np
+from markerplace.imaging.engine import EngineSpec, ImagingEngine
+from markerplace.runtime.workers import default_workers
+from markerplace.testbed.marker_sets import NO_MARKERS, marker_set_count
 
 log = logging.getLogger(__name__)
 
@@ -144,8 +149,6 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     discretization) instead of the bound; ``seconds_per_pose``: a measured cost of one pose on
     one core (:func:`time_sample`) instead of :data:`SECONDS_PER_POSE_CORE`.
     """
-    from markerplace.runtime.workers import default_workers
-
     d = plan_config.discretize
     lo, hi = scene.bounds
     w = max(float(hi[0] - lo[0]) - 2 * d.clearance, 0.0)
@@ -162,8 +165,6 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     core_seconds = poses * per_pose
     queries = 0
     if evaluate_config is not None:
-        from markerplace.testbed.marker_sets import NO_MARKERS, marker_set_count
-
         with_markers = marker_set_count(evaluate_config) + extra_placements
         placements = with_markers + (1 if NO_MARKERS in evaluate_config.study.methods else 0)
         queries = evaluate_config.test.tests * len(evaluate_config.test.sets) * placements
@@ -217,12 +218,8 @@ class PoseSample:
 def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSES) -> PoseSample:
     """Render and extract features at ``n`` poses spread over ``world_from_cam`` ((N, 4, 4)) in
     this process, as a worker of the observe stage does (OpenCV on one thread), and time it."""
-    import time
-
     import cv2
-    import numpy as np
 
-    from markerplace.imaging.engine import EngineSpec, ImagingEngine
 
     poses = np.asarray(world_from_cam, float).reshape(-1, 4, 4)
     pick = np.unique(np.linspace(0, len(poses) - 1, max(2, n)).round().astype(int)) if len(poses) else []
@@ -277,11 +274,6 @@ def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = Fa
     :func:`time_sample` of the scene's own poses, the stage times of :func:`estimate_plan` (plus
     the evaluation's, for ``evaluate``) logged, and :func:`check_run_size` on them. Returns the
     callable ``check(disc)``."""
-    from dataclasses import replace
-
-    from markerplace.progress import format_duration
-    from markerplace.runtime.workers import default_workers
-
     def check(disc) -> None:
         N = len(disc.world_from_cam)
         sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
@@ -326,8 +318,6 @@ def over_limits(estimate: RunEstimate, limits: SizeLimits = SizeLimits(),
 
 def _seconds_since_start() -> float:
     """Wall seconds since this process started (imports included)."""
-    import time
-
     import psutil
 
     try:

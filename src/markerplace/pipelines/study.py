@@ -29,6 +29,12 @@ import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
+from markerplace.pipelines.evaluate import run_evaluation
+from markerplace.pipelines.plan import prepare
+from markerplace.plan.place.stage import place
+from markerplace.report.figures import recall_vs_k
+from markerplace.testbed.metrics import hit_mask, main_threshold, threshold_label
+from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +62,6 @@ class StudyPlan:
 
 def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
     """(method, run, k) -> (n,) bool hits of one evaluation at ``threshold`` for ``test_set``."""
-    from markerplace.testbed.metrics import hit_mask
-
     with np.load(run_dir / "query_errors.npz", allow_pickle=False) as z:
         methods, runs, ks = z[f"{test_set}_method"], z[f"{test_set}_run"], z[f"{test_set}_k"]
         t, r = z[f"{test_set}_t_err"], z[f"{test_set}_r_err"]
@@ -66,9 +70,6 @@ def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
 
 def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress: bool) -> dict:
     """OMP placements with the other v values and without similarity (internal frame)."""
-    from markerplace.pipelines.plan import prepare
-    from markerplace.plan.place.stage import place
-
     k = plan_config.placement.k
     data = prepare(scene_spec, plan_config, work / "plan", progress=progress, k=k)
     out = {f"omp-v{v:g}": place(data, replace(plan_config.placement, method="omp", v=v, k=k), progress=False).markers
@@ -126,9 +127,6 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
         plan: what the study varies.
         progress: progress bars.
     """
-    from markerplace.pipelines.evaluate import run_evaluation
-    from markerplace.testbed.metrics import main_threshold, threshold_label
-
     out = Path(out_dir)
     work = out / "work"
     ks = sorted(set(config.study.ks))
@@ -181,8 +179,6 @@ def _groups(hits: dict, plan: StudyPlan, v_default: float) -> list[tuple[str, li
 
 
 def _markdown(groups: list, default: dict, ks: list, label: str, seed: int) -> str:
-    from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference
-
     cols = [0] + ks
     lines = [f"# Parameter and sensitivity study: recall at {label} (%)", "",
              "Low-scoring (weighted) test images unless a row says otherwise; k = 0 is no markers. Under each "
@@ -221,8 +217,6 @@ def _write_csv(path: Path, groups: list, ks: list) -> None:
 
 
 def _figures(out: Path, groups: list, ks: list, label: str) -> None:
-    from markerplace.report.figures import recall_vs_k
-
     cols = [0] + ks
     for group, rows in groups:
         curves = {name: (np.array([100 * series[k].mean() if k in series else np.nan for k in cols]), None)

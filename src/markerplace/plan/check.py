@@ -40,6 +40,9 @@ from markerplace.errors import UserError
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.types import MarkerCoverage
+from markerplace.imaging.engine import EngineSpec, imaging_job
+from markerplace.imaging.visibility import marker_points
+from markerplace.plan.score.stage import build_coverages, geometric_visibility
 
 log = logging.getLogger(__name__)
 
@@ -191,10 +194,6 @@ def installed_coverages(scene_spec, world_from_cam: np.ndarray, markers: Sequenc
     """One :class:`MarkerCoverage` per marker (internal frame) over the plan's poses, computed as
     ``prepare`` computes them for ``--existing`` markers (see module docstring); renders depth
     only at the poses that could see one of them."""
-    from markerplace.imaging.engine import EngineSpec, imaging_job
-    from markerplace.imaging.visibility import marker_points
-    from markerplace.plan.score.stage import build_coverages, geometric_visibility
-
     if not markers:
         return []
     T = np.array([m.world_from_marker for m in markers], dtype=float)

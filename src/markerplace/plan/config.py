@@ -9,7 +9,7 @@ Each stage takes only its own sub-config (:class:`~markerplace.plan.discretize.s
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from markerplace.errors import UserError
 from markerplace.imaging.config import ImagingConfig

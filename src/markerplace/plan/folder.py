@@ -16,6 +16,10 @@ from pathlib import Path
 from markerplace.errors import UserError
 from markerplace.markers import Marker, marker_from_json
 from markerplace.scene.spec import SceneSpec
+from markerplace.config_file import upgrade_legacy
+from markerplace.jsonfile import read_json
+from markerplace.plan.config import PlanConfig
+from markerplace.scene.worldframe import points_to_internal
 
 log = logging.getLogger(__name__)
 
@@ -76,8 +80,6 @@ class PlanFolder:
     def config_in_scene_frame(self, offset):
         """The config with ``discretize.start`` moved into the scene's internal frame (as
         ``plan`` ran it; ``offset`` from :func:`markerplace.scene.worldframe.world_offset`)."""
-        from markerplace.scene.worldframe import points_to_internal
-
         start = self.config.discretize.start
         if start is None or not any(offset):
             return self.config
@@ -86,8 +88,6 @@ class PlanFolder:
 
 
 def _read_json(path: Path, what: str) -> dict:
-    from markerplace.jsonfile import read_json
-
     try:
         data = read_json(path)
     except UserError as err:
@@ -100,8 +100,6 @@ def _read_json(path: Path, what: str) -> dict:
 def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
     """Read a plan folder. Raises :class:`UserError` (one line) for a missing folder, a folder
     that is not a finished plan run, or damaged files."""
-    from markerplace.plan.config import PlanConfig
-
     path = Path(path)
     if not path.is_dir():
         raise UserError(f"{option} {str(path)!r} is not a folder: give the --out folder of a `markerplace plan` run")
@@ -116,8 +114,6 @@ def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
         raise UserError(f"{path} was not written by `markerplace plan` (config.json has no scene or placement.json "
                         f"no markers): {rerun}")
     try:
-        from markerplace.config_file import upgrade_legacy
-
         config = config_from_dict(PlanConfig, upgrade_legacy(config_json))  # older folders: flat discretize
         markers = [marker_from_json(r) for r in placement["markers"]]
         existing = [marker_from_json(r) for r in config_json.get("existing_markers", [])]

@@ -29,6 +29,9 @@ import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path, fixed, write_json
 from markerplace.runtime import run_folder
+from markerplace.report.deliverables import write_known_tag_maps
+from markerplace.report.figures import floor_map, per_location_mean
+from markerplace.scene.worldframe import discretization_to_user, poses_to_user
 
 log = logging.getLogger(__name__)
 
@@ -41,16 +44,10 @@ differ from the planned ones in the last digits."""
 
 
 def _user(T, offset):
-    from markerplace.scene.worldframe import poses_to_user
-
     return None if T is None else poses_to_user(T, offset)
 
 
 def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
-    from markerplace.scene.worldframe import discretization_to_user
-    from markerplace.report.deliverables import write_known_tag_maps
-    from markerplace.report.figures import floor_map, per_location_mean
-
     run_folder.make_dirs(out)
     disc = discretization_to_user(result.disc, offset)
     sp, si = result.score_planned, result.score_installed

@@ -15,6 +15,8 @@ import numpy as np
 
 from markerplace.report.pdf import write_tags_pdf
 from markerplace.report.tagmaps.write import write_tag_maps
+from markerplace.runtime import run_folder
+from markerplace.scene.source import file_up_axis, world_from_file_rotation
 
 __all__ = ["write_deliverables", "write_known_tag_maps", "field_extent"]
 
@@ -47,9 +49,6 @@ def write_known_tag_maps(folder: Path, markers: Sequence, name: str, disc, scene
     """``tagmaps/``: the known-tag maps of ``markers`` (user frame) in the model frame and, for a
     file whose up axis is not z, in the file's axes (``*_<axis>up.*``); maps an earlier run
     wrote in other axes are removed (other files are left alone). Returns the files written."""
-    from markerplace.runtime import run_folder
-    from markerplace.scene.source import file_up_axis, world_from_file_rotation
-
     axis = file_up_axis(scene_source, up)
     written = write_tag_maps(folder, list(markers), name=name, field=field_extent(disc),
                              world_from_file=world_from_file_rotation(scene_source, up),

@@ -11,13 +11,20 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from markerplace.runtime.atomic_io import atomic_path
 
-from markerplace.runtime.atomic_io import atomic_path  # noqa: E402
+
+def _pyplot():
+    """matplotlib's pyplot on the Agg backend (no display), imported when a figure is drawn:
+    it takes half a second, which ``markerplace --help`` should not pay."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 MISSING_COLOR = "#ff00ff"
 """Colour of the crosses that mark missing tags (magenta: no colour map here uses it)."""
@@ -91,6 +98,7 @@ def floor_map(path: str | Path, *, occupancy: np.ndarray, origin: Sequence[float
     loc_p = panel_of(location_panel, len(locations))
     cols = min(S, 2)
     rows = int(np.ceil(S / cols))
+    plt = _pyplot()
     fig, axes = plt.subplots(rows, cols, figsize=(8 * cols, 6.5 * rows), dpi=110, squeeze=False)
     vmin, vmax = (float(np.min(values)), float(np.max(values))) if len(values) else (0.0, 1.0)
     if value_range is not None:  # a fixed scale (e.g. 0 = nothing lost), widened to hold every value
@@ -148,6 +156,7 @@ def recall_vs_k(path: str | Path, ks: Sequence[int], curves: dict[str, tuple[np.
 
     ``curves`` maps a method name to (mean (len(ks),), std (len(ks),) or None).
     """
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4), dpi=110)
     for name, (mean, std) in curves.items():
         line, = ax.plot(ks, mean, marker="o", label=name)

@@ -30,6 +30,7 @@ import numpy as np
 
 from markerplace.geometry import Intrinsics, project, world_from_cam_pose
 from markerplace.tagfamily import outer_size
+from markerplace.render.renderer import Renderer
 
 __all__ = ["CLOSE_DISTANCE", "WIDE_DISTANCE", "standing_distance", "wide_turn", "InstallerViews", "render_installer_views",
            "draw_outline", "draw_dimension", "Label", "LabelLayout"]
@@ -333,8 +334,6 @@ def render_installer_views(scene, markers: Sequence, places: Sequence, caster, o
         origin / resolution: the occupancy grid's lower-left corner and cell size, metres.
         labels: outline label per marker (e.g. ``"#1 id 0"``).
     """
-    from markerplace.render.renderer import Renderer
-
     views = []
     W, H = IMAGE_SIZE
     close_intr = Intrinsics.from_fov(W, H, CLOSE_HFOV)

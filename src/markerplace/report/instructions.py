@@ -42,6 +42,9 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.report.captions import MAX_RANGE, TagPlace, WallEnd, describe_tag, facing_name, wall_side
+from markerplace.report.captions import facing_label
+from markerplace.runtime.atomic_io import fixed
+from markerplace.scene.raycast import RayCaster
 
 __all__ = ["install_instructions", "install_to_frame", "place_from_install", "storey_words", "wall_words",
            "height_words", "along_words", "surface_name", "pages_words", "CHECKLIST_COLUMNS", "checklist_row", "caption_lines"]
@@ -92,8 +95,6 @@ def install_instructions(scene, markers: Sequence, storeys: Sequence[int], store
         caster: the scene's :class:`~markerplace.scene.raycast.RayCaster` (built when None).
     """
     if caster is None and len(markers):
-        from markerplace.scene.raycast import RayCaster
-
         caster = RayCaster(*scene.geometry())
     out = []
     for i, m in enumerate(markers):
@@ -164,7 +165,6 @@ def place_from_install(install: dict) -> TagPlace:
         return WallEnd(np.inf if e["distance_m"] is None else float(e["distance_m"]), e["reference"])
 
     n = np.asarray(install["wall_normal"], float)
-    from markerplace.report.captions import facing_label
 
     return TagPlace(facing_label(n), install["wall"], float(install["height_m"]), float(install["floor_z"]),
                     end("left"), end("right"), n, np.asarray(install["right_dir"], float),
@@ -237,8 +237,6 @@ def caption_lines(record: dict) -> list[str]:
 def checklist_row(record: dict) -> list:
     """One ``placement.csv`` row (:data:`CHECKLIST_COLUMNS`) of a placement.json marker record
     with its ``install`` object."""
-    from markerplace.runtime.atomic_io import fixed
-
     inst = record["install"]
     x, y, z = record["position"]
     left, right = inst["left"], inst["right"]

@@ -18,6 +18,10 @@ from markerplace.report.figures import floor_map, per_location_mean
 from markerplace.report.instructions import install_to_frame
 from markerplace.report.sheets import sheet_plan
 from markerplace.report.printable import write_tag_sheets
+from dataclasses import replace
+from markerplace.report.deliverables import write_deliverables
+from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row, install_instructions
+from markerplace.scene.worldframe import discretization_to_user, markers_to_user
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +64,6 @@ def plan_instructions(scene, placement, disc, height: float, surfaces: Sequence 
     above the storey's floor map in front of its wall (furniture tops are not floor there), so
     the floor is the tag's z minus ``height``; its storey is its candidate's.
     """
-    from markerplace.report.instructions import install_instructions
-
     t0 = time.perf_counter()
     storeys = [int(disc.candidate_storey[int(c)]) for c in placement.candidates]
     floors = [float(m.position[2]) - float(height) for m in placement.markers]
@@ -76,8 +78,6 @@ def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, m
     """placement.json (markers + summary), placement.csv (the installer's checklist, one row per
     marker: :data:`~markerplace.report.instructions.CHECKLIST_COLUMNS`) and tags/ (one print-ready
     SVG per marker)."""
-    from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row
-
     write_json(out_dir / "placement.json", {"scene": scene_source, "method": method, **extra, "markers": list(records)})
     buf = io.StringIO()
     writer = csv.writer(buf)
@@ -111,10 +111,6 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     install = plan_instructions(scene, placement, data.disc, config.discretize.height,
                                 [r.get("surface") for r in placement_records(placement, method, data.disc)])
     if world_offset is not None and np.any(world_offset):
-        from dataclasses import replace
-
-        from markerplace.scene.worldframe import discretization_to_user, markers_to_user
-
         data = replace(data, disc=discretization_to_user(data.disc, world_offset))
         placement = replace(placement, markers=markers_to_user(placement.markers, world_offset))
         existing = markers_to_user(existing, world_offset)
@@ -143,7 +139,6 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     for r, sh in zip(records, sheet_plan(records, paper)):  # where each tag is in tags.pdf
         r["install"].update(pages=sh.pages, tiles=list(sh.tiles))
     write_placement(out_dir, records, scene_source, method, {"summary": summary})
-    from markerplace.report.deliverables import write_deliverables
 
     write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,

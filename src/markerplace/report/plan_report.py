@@ -25,6 +25,13 @@ import numpy as np
 
 from markerplace.report.html import esc, img, jpeg_uri, png_file_uri, table, write_page
 from markerplace.report.review import REVIEW_SCRIPT, reject_button, review_box, surface_line
+from markerplace.markers import load_markers
+from markerplace.plan.discretize.wall_candidates import RULES, rule_words
+from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.report.installer import render_installer_views
+from markerplace.report.instructions import (along_words, height_words, install_to_frame, pages_words, place_from_install, storey_words, wall_words)
+from markerplace.scene.raycast import RayCaster
+from markerplace.scene.worldframe import markers_to_internal
 
 log = logging.getLogger(__name__)
 
@@ -80,8 +87,6 @@ def _scene_section(doc: dict, num_markers: int) -> str:
 def _removed_words(removed: dict, size: float) -> str:
     """What the candidate rules and the planner removed, e.g. ``"3 on glass, 2 on doors, ...,
     1 seen by no camera"`` (:mod:`markerplace.plan.discretize.wall_candidates`; ``size``: the tag, metres)."""
-    from markerplace.plan.discretize.wall_candidates import RULES, rule_words
-
     words = [f"{removed[r]} {rule_words(r, size)}" for r in RULES if removed.get(r)]
     words += [f"{removed['not seen']} seen by no camera"] if removed.get("not seen") else []
     return ", ".join(words) or "none"
@@ -109,8 +114,6 @@ def _maps_section(out_dir: Path) -> str:
 def _order_note(method) -> str:
     """What the placement order means for ``method``: greedy methods pick the most useful tag
     first, the others have no ranking."""
-    from markerplace.plan.place.methods import PLACEMENT_METHODS
-
     cls = PLACEMENT_METHODS.get(method)
     return "; each earlier tag helps most" if cls is not None and cls.nested else " (the order is not a ranking)"
 
@@ -128,13 +131,6 @@ def write_plan_report(out_dir: str | Path, scene, disc, height: float, world_off
         world_offset: (3,) user-frame offset of the internal frame (``p_internal = p_user -
             offset``, :mod:`markerplace.scene.worldframe`); None = not shifted.
     """
-    from markerplace.markers import load_markers
-    from markerplace.scene.raycast import RayCaster
-    from markerplace.scene.worldframe import markers_to_internal
-    from markerplace.report.installer import render_installer_views
-    from markerplace.report.instructions import (along_words, height_words, install_to_frame, pages_words, place_from_install,
-                               storey_words, wall_words)
-
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     doc = json.loads((out_dir / "placement.json").read_text())

@@ -19,6 +19,7 @@ import numpy as np
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
 from markerplace.runtime import run_folder
+from markerplace.report.instructions import caption_lines
 
 
 def tag_modules(tag_id: int) -> np.ndarray:
@@ -88,8 +89,6 @@ def caption_for(record: dict) -> list[str]:
     """Caption lines of a ``placement.json`` marker record: order, id and size; where it hangs
     (from its ``install`` object: storey, wall, height above the floor, distance to the nearer
     corner or door edge); "this edge down" (:func:`markerplace.report.instructions.caption_lines`)."""
-    from markerplace.report.instructions import caption_lines
-
     return caption_lines(record)
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 
 from markerplace.report.html import esc
+from urllib.parse import quote
 
 __all__ = ["surface_line", "reject_button", "review_box", "REVIEW_SCRIPT"]
 
@@ -76,7 +77,6 @@ def reject_button(record: dict) -> str:
 def review_box(scene: str, out_dir: str = "PLAN_DIR") -> str:
     """The box with the download link and how to replan (the page ends with :data:`REVIEW_SCRIPT`)."""
     empty = json.dumps({"format": "markerplace-exclude/1", "scene": scene, "spots": []})
-    from urllib.parse import quote
 
     return ("<div class=\"review\"><p><b>Review.</b> Reject the spots a person would not use with the "
             "<i>Reject this spot</i> button of each tag, then download the file and replan; the cached stages "

@@ -29,6 +29,9 @@ import numpy as np
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.scene.export import GLTF_FROM_WORLD, scene_to_glb_bytes
 from markerplace.scene.types import MeshPart, Scene
+from markerplace.scene.source import world_from_file_rotation
+from markerplace.scene.worldframe import markers_to_internal, world_offset
+from markerplace.tagfamily import outer_size, tag_image
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +44,6 @@ PIXELS_PER_BIT = 16
 def tag_part(marker) -> MeshPart:
     """A textured quad of ``marker`` (internal frame): 4 vertices TL, TR, BR, BL as a facing
     viewer sees them, 2 triangles counter-clockwise seen from the marker's +z."""
-    from markerplace.tagfamily import outer_size, tag_image
-
     h = outer_size(marker.size) / 2.0
     T = np.asarray(marker.world_from_marker, dtype=np.float64)
     local = np.array([[-h, h, TAG_LIFT_M], [h, h, TAG_LIFT_M], [h, -h, TAG_LIFT_M], [-h, -h, TAG_LIFT_M]])
@@ -58,9 +59,6 @@ def tag_part(marker) -> MeshPart:
 def export_plan_glb(folder, out: str | Path) -> dict:
     """Write the model of the plan ``folder`` (:class:`~markerplace.plan.folder.PlanFolder`) with
     its tags to ``out`` (binary glTF, atomically). Returns a summary (tags, faces, frames)."""
-    from markerplace.scene.source import world_from_file_rotation
-    from markerplace.scene.worldframe import markers_to_internal, world_offset
-
     scene = folder.spec.load()
     offset = world_offset(scene)
     R = world_from_file_rotation(folder.scene, folder.scene_options.get("up"))

@@ -37,6 +37,7 @@ from markerplace.errors import UserError
 from markerplace.settings import setting
 from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
 from markerplace.runtime.workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
+import signal
 
 log = logging.getLogger(__name__)
 
@@ -316,8 +317,6 @@ class DaskExecutor(Executor):
     def _stop_local_workers(self) -> None:
         """SIGTERM to a ``LocalCluster``'s worker processes: they stop at once and silently,
         instead of logging the cancellation of the tasks they were running."""
-        import signal
-
         workers = getattr(self._cluster, "workers", None) or {}
         for nanny in list(workers.values()):
             pid = getattr(getattr(getattr(nanny, "process", None), "process", None), "pid", None)

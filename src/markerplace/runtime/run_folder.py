@@ -31,6 +31,8 @@ from typing import Iterable
 
 from markerplace.errors import UserError, write_error
 from markerplace.runtime.run_lock import RunLock
+from markerplace import __version__
+from markerplace.output_checks import check_output_dir
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +145,6 @@ class RunFolder:
         if marker.is_file() and not marker.is_symlink():
             return
         foreign = len(set(os.listdir(self.real)) - set(BOOKKEEPING))
-        from markerplace import __version__
 
         text = json.dumps({"markerplace_run": 1, "version": __version__, "command": command, "adopted": bool(foreign),
                            "created": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n"
@@ -277,8 +278,6 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
             without the marker (and not ``adopt``); a link to a folder inside it; a folder that
             cannot be written; a folder another run holds (naming its pid).
     """
-    from markerplace.output_checks import check_output_dir
-
     given = Path(path)
     if given.is_symlink() and not given.exists():
         raise UserError(f"{option} {given} is a symbolic link to {os.readlink(given)}, which does not exist: give a "

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from markerplace.errors import UserError, write_error
+import fcntl
 
 log = logging.getLogger(__name__)
 
@@ -89,8 +90,6 @@ class RunLock:
                 raise write_error(self.path, err) from None
             holder = _read(fd)
             try:
-                import fcntl
-
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 flocked = True
             except BlockingIOError:

@@ -26,6 +26,8 @@ import sys
 import threading
 from contextlib import contextmanager
 from typing import Callable, Iterator
+from multiprocessing import resource_tracker
+from markerplace.runtime.interrupt import deferred
 
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -55,7 +57,6 @@ def children_without_sigint(sigterm: bool = False) -> Iterator[None]:
         return
     # multiprocessing starts its resource tracker on first use and then UNBLOCKS SIGINT and
     # SIGTERM in the thread that started it (instead of restoring the mask): start it now
-    from multiprocessing import resource_tracker
 
     resource_tracker.ensure_running()
     blocked = {signal.SIGINT, signal.SIGTERM} if sigterm else {signal.SIGINT}
@@ -114,8 +115,6 @@ def spawn_pool(workers: int, initializer: Callable, initargs: tuple) -> Iterator
     an exception in the ``with`` body the pool is terminated (its stop event set, workers sent
     SIGTERM), not joined.
     """
-    from markerplace.runtime.interrupt import deferred
-
     ctx = mp.get_context("spawn")
     stop = ctx.Event()
     saved = {k: os.environ.get(k) for k in THREAD_ENV}

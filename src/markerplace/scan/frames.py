@@ -45,6 +45,7 @@ from markerplace.runtime.atomic_io import atomic_path
 from markerplace.scan.frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
                        read_intrinsics)
 from markerplace.scan.tum import TUM_MAX_DT, read_tum
+from markerplace.runtime.atomic_io import write_image, write_json
 
 log = logging.getLogger(__name__)
 
@@ -177,8 +178,6 @@ class FrameWriter:
     """
 
     def __init__(self, root: str | Path, intrinsics: Intrinsics, depth_scale: float = MARKERPLACE_DEPTH_SCALE):
-        from markerplace.runtime.atomic_io import write_json
-
         self.root = Path(root)
         self.intrinsics = intrinsics
         self.depth_scale = float(depth_scale)
@@ -191,7 +190,6 @@ class FrameWriter:
         """Write one frame: rgb (H, W, 3) uint8, depth (H, W) uint16 in ``depth_scale`` units, (4, 4) pose."""
         import cv2
 
-        from markerplace.runtime.atomic_io import write_image
 
         if not FRAME_NAME_RE.match(name):
             raise ValueError(f"bad frame name {name!r}")

@@ -27,6 +27,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
+from markerplace.jsonfile import read_json
 
 ROTATION_TOLERANCE = 2e-3
 """Largest accepted entry of |R^T R - I| of a pose rotation."""
@@ -126,8 +127,6 @@ def read_intrinsics(path: Path, default_depth_scale: float) -> tuple[Intrinsics,
     Returns:
         (intrinsics, depth units per metre).
     """
-    from markerplace.jsonfile import read_json
-
     path = Path(path)
     if not path.is_file():
         raise UserError(f"intrinsics file {path} not found")

@@ -28,6 +28,7 @@ from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, invert
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.progress import track
+from markerplace.scan.frames import load_frame
 
 log = logging.getLogger(__name__)
 
@@ -212,8 +213,6 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     Raises:
         UserError: a bad image (see :func:`~markerplace.scan.frames.load_frame`), or no surface.
     """
-    from markerplace.scan.frames import load_frame
-
     config.validate()
     frames = fs.frames[:: int(config.every)]
     fusion = TSDFFusion(fs.intrinsics, config)

@@ -30,6 +30,8 @@ from markerplace.scene.types import Scene
 from markerplace.scan.depth_noise import DEPTH_SCALE, DepthNoiseConfig, camera_rays, noisy_depth, to_depth_png
 from markerplace.scan.fuse import FuseConfig, TSDFFusion
 from markerplace.scan.walk import WalkConfig, plan_walk, seeded_rng
+from markerplace.render.renderer import Renderer
+from markerplace.scan.frames import FrameWriter
 
 log = logging.getLogger(__name__)
 
@@ -107,8 +109,6 @@ class FrameSimulator:
     """
 
     def __init__(self, scene: Scene, config: ScanConfig = ScanConfig()):
-        from markerplace.render.renderer import Renderer
-
         self.config = config
         self.intrinsics = config.intrinsics
         self._rays = camera_rays(self.intrinsics)
@@ -171,8 +171,6 @@ def simulate_scan(scene: Scene, config: ScanConfig = ScanConfig(), seed: int = 0
     Returns:
         :class:`ScanResult`.
     """
-    from markerplace.scan.frames import FrameWriter
-
     t0 = time.perf_counter()
     config.fuse.validate()
     intr = config.intrinsics

@@ -25,6 +25,7 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.geometry import rotation_from_yaw
 from markerplace.scene.types import Room, Scene
+from markerplace.scene.raycast import RayCaster
 
 log = logging.getLogger(__name__)
 
@@ -177,8 +178,6 @@ def plan_walk(scene: Scene, cfg: WalkConfig = WalkConfig(), seed: int = 0) -> tu
     Raises:
         UserError: the scene has no rooms, or no feasible position at all.
     """
-    from markerplace.scene.raycast import RayCaster
-
     if not scene.rooms:
         raise UserError(f"scene {scene.name!r} has no rooms: a simulated scan needs a built-in scene")
     if cfg.yaws < 1 or not cfg.pitches_deg or cfg.spacing <= 0:

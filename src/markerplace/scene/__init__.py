@@ -12,6 +12,8 @@ from pathlib import Path
 
 from markerplace.errors import UserError
 from markerplace.scene.types import MeshPart, Room, Scene
+from markerplace.scene.builtin.catalogue import builtin_names, get_builtin
+from markerplace.scene.loader import SUPPORTED_EXTENSIONS, load_mesh_file
 
 log = logging.getLogger(__name__)
 
@@ -34,9 +36,6 @@ def load_scene(spec: str, up: str | None = None, unit_scale: float | None = None
     Raises:
         UserError: unknown name, missing or unreadable file, implausible units.
     """
-    from markerplace.scene.builtin.catalogue import builtin_names, get_builtin
-    from markerplace.scene.loader import SUPPORTED_EXTENSIONS, load_mesh_file
-
     key = str(spec).strip()
     if key.lower() in builtin_names() and not Path(key).is_file():
         if (up not in (None, "z")) or (unit_scale not in (None, 1.0)):

@@ -48,6 +48,7 @@ from markerplace.scene import sanity
 from markerplace.scene.mesh_text import decode_text, original_names
 from markerplace.scene.transparency import material_transparency, read_gltf_json
 from markerplace.scene.types import MeshPart, Scene
+import io
 
 log = logging.getLogger(__name__)
 
@@ -164,8 +165,6 @@ def _resolver(path: Path):
 def _read_instances(path: Path, ext: str) -> list[tuple]:
     """Every triangle-mesh instance of the file's scene graph: (name, trimesh.Trimesh, (4, 4)
     file_from_mesh, names): ``names`` as :attr:`MeshPart.names` (see the module docstring)."""
-    import io
-
     import trimesh
 
     fmt = _FORMAT_NAMES[ext]

@@ -24,6 +24,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.scene.mesh_text import decode_text, original_names
+import multiprocessing
 
 log = logging.getLogger("markerplace.scene.loader")
 
@@ -33,8 +34,6 @@ _WARNED: set[str] = set()
 def warn_once(message: str, *args) -> None:
     """Log a warning once per process, and only in the main process: the scene is loaded again
     by each stage and in every rendering worker, and the user needs to read it once."""
-    import multiprocessing
-
     text = message % args if args else message
     if multiprocessing.parent_process() is not None or text in _WARNED:
         log.debug(text)

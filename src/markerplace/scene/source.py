@@ -9,6 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from markerplace.scene.builtin.catalogue import builtin_names
+from markerplace.scene.loader import up_rotation
 
 __all__ = ["is_builtin", "file_up_axis", "world_from_file_rotation"]
 
@@ -17,8 +19,6 @@ GLTF_EXTENSIONS = (".glb", ".gltf")
 
 def is_builtin(spec: str) -> bool:
     """True when ``spec`` names a built-in scene (the rule of :func:`markerplace.scene.load_scene`)."""
-    from markerplace.scene.builtin.catalogue import builtin_names
-
     key = str(spec).strip()
     return key.lower() in builtin_names() and not Path(key).is_file()
 
@@ -35,7 +35,5 @@ def file_up_axis(spec: str, up: str | None) -> str | None:
 
 def world_from_file_rotation(spec: str, up: str | None) -> np.ndarray | None:
     """(3, 3) the loader's ``world_from_file`` rotation for ``spec`` (None for built-ins)."""
-    from markerplace.scene.loader import up_rotation
-
     axis = file_up_axis(spec, up)
     return None if axis is None else np.asarray(up_rotation(axis), dtype=float)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from markerplace.scene import load_scene
 
 __all__ = ["SceneSpec"]
 
@@ -18,6 +19,4 @@ class SceneSpec:
     seed: int = 0
 
     def load(self):
-        from markerplace.scene import load_scene
-
         return load_scene(self.spec, up=self.up, unit_scale=self.unit_scale, seed=self.seed)

@@ -23,6 +23,7 @@ from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
+from dataclasses import fields
 
 OFFSET_KEY = "world_offset"
 
@@ -83,8 +84,6 @@ _DISC_FIELDS = {"locations": "xy", "location_z": "z", "world_from_cam": "pose",
 def discretization_to_user(disc, offset: np.ndarray):
     """A :class:`~markerplace.plan.discretize.artifact.Discretization` with every position in the user frame
     (locations, heights, poses, candidates, grid origin, storey floors, scan points)."""
-    from dataclasses import fields
-
     off = np.asarray(offset, dtype=np.float64)
     if not np.any(off):
         return disc

@@ -52,6 +52,13 @@ from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_imag
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
 from markerplace.testbed.predict import ImageSet, PredictContext, predict_placements
+from markerplace.plan.place.greedy import apply_coverages
+from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
+from markerplace.plan.score.localizability import entropy
+from markerplace.plan.score.stage import coverages_with_model
+from markerplace.plan.score.success_model import SuccessModel, fit_success_model
+from markerplace.testbed import poses as tp
+from markerplace.testbed.config import LocalizationConfig
 
 log = logging.getLogger(__name__)
 
@@ -97,8 +104,6 @@ def offgrid_poses(data, grid_spacing: float, num: int, seed: int):
     """``num`` test-like calibration poses (:class:`~markerplace.testbed.poses.TestPoses`): feasible
     poses drawn uniformly, perturbed like test poses, in free space, from stream
     :data:`OFFGRID_STREAM` of ``seed`` (never the test images: those use stream 0)."""
-    from markerplace.testbed import poses as tp
-
     tcfg = tp.TestPoseConfig(num=num, mode="uniform", seed=seed, stream=OFFGRID_STREAM)
     return tp.sample_test_poses(np.asarray(data.disc.world_from_cam, float), data.base_score, grid_spacing, tcfg,
                                 tp.free_space_of(data.disc, tcfg.min_clearance))
@@ -122,9 +127,6 @@ def placement_candidates(markers, candidate_world_from_marker: np.ndarray, tag_s
 def scores_with(data, coverages: list, candidates: np.ndarray) -> np.ndarray:
     """(N,) score ``-H`` of every pose with the given candidates' tags (``coverages``: per
     candidate, e.g. under another marker model; existing markers not added)."""
-    from markerplace.plan.score.localizability import entropy
-    from markerplace.plan.place.greedy import apply_coverages
-
     return -entropy(apply_coverages(data.base_info, [coverages[int(c)] for c in candidates]))
 
 
@@ -166,11 +168,6 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
             (:mod:`markerplace.testbed.map_setup`).
         imaging_config: the testbed's imaging (default: the plan's camera, OpenCV SIFT).
     """
-    from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
-    from markerplace.plan.score.stage import coverages_with_model
-    from markerplace.plan.score.success_model import SuccessModel, fit_success_model
-    from markerplace.testbed.config import LocalizationConfig
-
     names = [plan_config.placement.method] if methods is None else list(methods)
     run_dir = Path(run_dir)
     folder = run_dir / "calibration" if cache_dir is None else Path(cache_dir)
@@ -256,8 +253,6 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
         model name -> dict with ``score``, ``success``, ``tagged`` arrays and ``placements``
         (the (method, run, k) keys used).
     """
-    from markerplace.plan.score.stage import coverages_with_model
-
     sets = {}
     for p in placements:
         if p.method == NO_MARKERS or (p.method, p.run, p.k) not in success:

@@ -34,6 +34,7 @@ from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_ba
 from markerplace.testbed.calibration import MAP_SET
 from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, with_candidate_ids
 from markerplace.testbed.predict import PredictContext, predict_placements
+from markerplace.testbed.marker_sets import baseline_methods
 
 log = logging.getLogger(__name__)
 
@@ -234,8 +235,6 @@ def ceiling_markdown(rows: list[dict], estimate: dict, ks: Sequence[int], thresh
         threshold_label: the recall threshold the table reports (e.g. ``5cm/5deg``).
         held_out: :func:`held_out_estimate`, or None to leave its rows out.
     """
-    from markerplace.testbed.marker_sets import baseline_methods
-
     def recall(ts, method, k):
         vals = [r["recall"] for r in rows if r["test_set"] == ts and r["method"] == method and r["k"] == k
                 and r["threshold"] == threshold_label]

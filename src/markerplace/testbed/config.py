@@ -12,6 +12,10 @@ from markerplace.settings import SEED_MAX, setting
 from markerplace.testbed.metrics import THRESHOLDS
 from markerplace.testbed.marker_sets import NO_MARKERS, method_names
 from markerplace.testbed.poses import TEST_SETS
+from dataclasses import fields
+from markerplace.localization.localizer import LOCALIZERS
+from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.validation import check_evaluate_config, parse_int_list
 
 #: ``--tag-ids`` choices (:attr:`StudyConfig.tag_ids`).
 TAG_IDS = ("order", "candidate")
@@ -24,23 +28,15 @@ def _name_list(text) -> tuple[str, ...]:
 
 def _int_list(text) -> tuple[int, ...]:
     """``--k``: comma list of positive marker budgets."""
-    from dataclasses import fields
-
-    from markerplace.validation import parse_int_list
-
     ks = next(f for f in fields(StudyConfig) if f.name == "ks")
     return parse_int_list(text, "--k", ks.metadata["setting"].bound())
 
 
 def _placement_help() -> str:
-    from markerplace.plan.place.methods import PLACEMENT_METHODS
-
     return PLACEMENT_METHODS.help()
 
 
 def _localizers():
-    from markerplace.localization.localizer import LOCALIZERS
-
     return LOCALIZERS
 
 
@@ -212,9 +208,6 @@ class EvaluateConfig:
 
 def validate_evaluate_config(config: EvaluateConfig) -> None:
     """Raise :class:`UserError` (one line) for settings that cannot work."""
-    from markerplace.localization.localizer import LOCALIZERS
-    from markerplace.validation import check_evaluate_config
-
     sets, methods = config.test.sets, config.study.methods
     if not sets or any(t not in TEST_SETS for t in sets):
         raise UserError(f"--test-sets {','.join(sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import platform
 from importlib import metadata
+from markerplace.render.gl_resources import create_context
 
 log = logging.getLogger(__name__)
 
@@ -25,8 +26,6 @@ PACKAGES = ("markerplace", "numpy", "scipy", "opencv-python-headless", "faiss-cp
 def gl_info() -> dict[str, str]:
     """``GL_RENDERER`` and ``GL_VERSION`` of a standalone EGL context (e.g. llvmpipe, Mesa's
     version); ``{"error": ...}`` when no context can be made."""
-    from markerplace.render.gl_resources import create_context
-
     try:
         ctx = create_context()
     except Exception as err:  # noqa: BLE001 - the record says why instead of failing the run

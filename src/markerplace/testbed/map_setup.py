@@ -19,6 +19,7 @@ from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.predict import ImageSet, PredictContext
+from markerplace.localization.vlad import VladCodebook
 
 __all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "vlad_codebook",
            "marker_free_images"]
@@ -53,8 +54,6 @@ def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages,
     """(codebook, key): the VLAD codebook trained on the marker-free map's descriptors,
     ``cache_dir/vlad_codebook.npz``; the key (with the digest of the map's features) fixes the
     map of every prediction made with it."""
-    from markerplace.localization.vlad import VladCodebook
-
     key = cache.hash_of("vlad-v2", base_key, map_base.digest, imaging, num_clusters, seed)
     codebook = cached("vlad_codebook", Path(cache_dir) / "vlad_codebook.npz", key,
                       lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),

@@ -19,6 +19,11 @@ from markerplace.imaging.engine import ImagingEngine
 from markerplace.imaging.features import FeatureSet, ImageFeatures
 from markerplace.runtime.atomic_io import write_json, write_npy
 from markerplace.markers import Marker
+from markerplace.localization.database import MapDatabase
+from markerplace.localization.localizer import get_localizer
+from markerplace.localization.tags import TagDetection
+from markerplace.localization.vlad import VladCodebook
+from markerplace.markers import marker_from_json
 
 __all__ = ["save_map", "load_map_database", "localize_features", "localize_task"]
 
@@ -36,10 +41,6 @@ def save_map(folder: str | Path, features: FeatureSet, world_from_cam: np.ndarra
 
 def load_map_database(folder: str | Path):
     """Build the :class:`~markerplace.localization.database.MapDatabase` saved by :func:`save_map`."""
-    from markerplace.localization.database import MapDatabase
-    from markerplace.localization.vlad import VladCodebook
-    from markerplace.markers import marker_from_json
-
     folder = Path(folder)
     feats = FeatureSet.load(folder, mmap=True)
     poses = np.load(folder / "poses.npy", allow_pickle=False)
@@ -53,8 +54,6 @@ def load_map_database(folder: str | Path):
 
 
 def _tag_detections(feats: ImageFeatures) -> list:
-    from markerplace.localization.tags import TagDetection
-
     return [TagDetection(int(t), np.asarray(c, np.float64), np.asarray(c, np.float64).mean(axis=0))
             for t, c in zip(feats.tag_ids, feats.tag_corners)]
 
@@ -71,8 +70,6 @@ def localize_task(engine: ImagingEngine, item) -> np.ndarray:
     exclude]) -> (4, 4) estimate, all NaN on failure. With features None the query is first
     rendered here with ``markers`` (its view holds some of them); ``exclude`` (map image
     indices left out of retrieval) localizes a map image against the rest of the map."""
-    from markerplace.localization.localizer import get_localizer
-
     folder, (name, settings), feats, world_from_cam, markers = item[:5]
     exclude = item[5] if len(item) > 5 else None
     if engine.cache.get("db_folder") != (folder, name, settings):

@@ -14,6 +14,11 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+import logging
+from dataclasses import replace
+from markerplace.markers import Marker
+from markerplace.plan.place.stage import place
+from markerplace.tagfamily import NUM_TAGS
 
 #: ``--methods`` name of the marker set without markers; every other name is a placement method
 #: of :data:`~markerplace.plan.place.methods.PLACEMENT_METHODS`.
@@ -66,8 +71,6 @@ class PlacementRun:
 def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
     """Move marker i along its wall (marker x axis) by ``s_i * shift`` metres, ``s_i = s0 (-1)^i``
     with a seeded random first sign ``s0``; orientation unchanged."""
-    from markerplace.markers import Marker
-
     if shift == 0.0 or not markers:
         return list(markers)
     s0 = 1.0 if np.random.default_rng(seed).random() < 0.5 else -1.0
@@ -81,8 +84,6 @@ def shift_markers(markers: Sequence, shift: float, seed: int) -> list:
 
 def scale_markers(markers: Sequence, scale: float) -> list:
     """Markers printed ``scale`` times their planned size (same centre and orientation)."""
-    from markerplace.markers import Marker
-
     if scale == 1.0:
         return list(markers)
     return [Marker(m.tag_id, m.size * scale, np.array(m.world_from_marker, float), m.family) for m in markers]
@@ -112,11 +113,6 @@ def with_candidate_ids(runs: Sequence[PlacementRun], candidate_world_from_marker
         runs: the marker sets (ids as placed).
         candidate_world_from_marker: (C, 4, 4) candidate poses.
     """
-    import logging
-
-    from markerplace.markers import Marker
-    from markerplace.tagfamily import NUM_TAGS
-
     C = len(candidate_world_from_marker)
     others: dict[tuple, int] = {}
 
@@ -153,10 +149,6 @@ def build_placements(data, placement_config, config,
     evaluated on prefixes; a ``randomized`` one (random, uniform) draws its own placement for
     every (run, k) with seed ``placement_seed + run``; any other is placed once per k.
     """
-    from dataclasses import replace
-
-    from markerplace.plan.place.stage import place
-
     study = config.study
     ks = sorted(set(study.ks))
     runs: list[PlacementRun] = []

@@ -32,6 +32,9 @@ from markerplace.testbed.maps import localize_task, save_map
 from markerplace.testbed.marker_sets import NO_MARKERS
 from markerplace.testbed.prediction_store import load_prediction, save_prediction
 from markerplace.testbed.render_store import RenderStore
+from markerplace.localization.localizer import LOCALIZERS
+from markerplace.localization.vlad import nearest
+from markerplace.registry import configure
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,8 +90,6 @@ class Retrieval:
     def candidates(self, vlad: np.ndarray, query: np.ndarray, exclude: Sequence[int] = ()) -> tuple:
         """The localizer's VLAD-only retrieval of ``query`` against the rows of ``vlad``,
         leaving out ``exclude`` (as :meth:`~markerplace.localization.localizer.Localizer.retrieve`)."""
-        from markerplace.localization.vlad import nearest
-
         skip = set(int(i) for i in exclude)
         order = nearest(vlad, query, self.n + len(skip))[0]
         return tuple(int(i) for i in order if int(i) not in skip)[:self.n]
@@ -319,13 +320,11 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
     """
     tb, map_base, codebook, cb_key, lcfg = ctx.tb, ctx.map_base, ctx.codebook, ctx.codebook_key, ctx.localizer
     imaging, cache_dir, timings = ctx.imaging, ctx.cache_dir, ctx.timings
-    from markerplace.localization.localizer import LOCALIZERS
 
     pred_dir = cache_dir / "predictions"
     timings.setdefault("map_with_markers", 0.0)
     timings.setdefault("localize", 0.0)
     predictions: dict[PredictionKey, np.ndarray] = {}
-    from markerplace.registry import configure
 
     name, settings = lcfg
     conf = configure(LOCALIZERS.lookup(name).default_conf, dict(settings))

@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.jsonfile import read_json
+from markerplace.scene.worldframe import points_to_user
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +103,6 @@ def load_exclusion(path: str | Path) -> Exclusion:
     if not path.is_file():
         raise UserError(f"--exclude {path}: no such file; give a JSON file of spots and boxes to avoid "
                         "(or the rejected.json that report.html downloads)")
-    from markerplace.jsonfile import read_json
 
     doc = read_json(path, f"--exclude {path}")  # size, UTF-8 and depth guards, one line
     _keys(doc, _TOP_KEYS, "the file", path)
@@ -178,8 +179,6 @@ def apply_exclusion(data, exclusion: Exclusion, offset, k: int):
     Raises:
         UserError: fewer than ``k`` candidates would be left.
     """
-    from markerplace.scene.worldframe import points_to_user
-
     drop = excluded(exclusion, points_to_user(data.disc.candidate_position, offset))
     left = data.num_candidates - int(drop.sum())
     log.info("plan: --exclude %s (%d spots, %d boxes) removes %d of %d candidates", exclusion.source,
@@ -199,7 +198,6 @@ def previous_markers(out: str | Path, scene: str) -> list | None:
     path = Path(out) / "placement.json"
     if not path.is_file():
         return None
-    from markerplace.jsonfile import read_json
 
     try:
         doc = read_json(path)

@@ -41,6 +41,8 @@ from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
 from markerplace.plan.place.greedy import apply_coverages, omp_greedy
 from markerplace.plan.types import PlanData
+from markerplace.errors import UserError
+from markerplace.plan.place.expected_recall import expected_recall_greedy
 
 log = logging.getLogger(__name__)
 
@@ -300,9 +302,6 @@ class ExpectedRecall(PlacementMethod):
     default_conf = Config()
 
     def place(self, data: PlanData, k: int, seed: int = 0, progress: bool = False) -> Choice:
-        from markerplace.errors import UserError
-        from markerplace.plan.place.expected_recall import expected_recall_greedy
-
         fit = data.calibration.get(self.name)
         if fit is None:
             raise UserError("--method expected-recall needs the calibration stage: run it through `markerplace plan` or "

@@ -36,6 +36,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from markerplace.plan.score.landmark_kernel import landmark_information_sums
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +197,6 @@ def pose_information(world_from_cam: np.ndarray, K: np.ndarray, points_world: np
     Lam = np.zeros((N, 6, 6))
     if P and N:
         # imported here: numba is slow to import and only this function needs it
-        from markerplace.plan.score.landmark_kernel import landmark_information_sums
 
         if np.any(idx[1:] < idx[:-1]):
             order = np.argsort(idx, kind="stable")

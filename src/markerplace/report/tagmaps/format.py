@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import ClassVar, Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from markerplace.registry import Registry
 from markerplace.runtime.atomic_io import clean_float
@@ -63,6 +62,8 @@ class TagMapFormat:
 
 def quaternion_wxyz(R: np.ndarray) -> np.ndarray:
     """(4,) unit quaternion (w, x, y, z), w >= 0, of a (3, 3) rotation matrix."""
+    from scipy.spatial.transform import Rotation
+
     x, y, z, w = Rotation.from_matrix(np.asarray(R, float)).as_quat()
     q = np.array([w, x, y, z])
     return -q if q[0] < 0 else q
@@ -70,6 +71,8 @@ def quaternion_wxyz(R: np.ndarray) -> np.ndarray:
 
 def rotation_vector(R: np.ndarray) -> np.ndarray:
     """(3,) axis x angle (radians) of a (3, 3) rotation matrix (angle in [0, pi])."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
 
 

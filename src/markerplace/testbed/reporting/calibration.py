@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path, write_npz
+from markerplace.plan.score.success_model import calibration_curve, fit_success_model, roc_auc
+from markerplace.testbed.reporting.tables import md_text
 
 __all__ = ["write_calibration_report"]
 
@@ -26,11 +28,8 @@ __all__ = ["write_calibration_report"]
 def write_calibration_report(out: Path, scene_name: str, outcomes: dict, bins: int = 10) -> dict:
     """Write the three outputs into ``out`` from :func:`markerplace.testbed.calibration.score_outcomes`'s
     result; returns, per model, its AUCs and fitted model (as JSON-ready dicts)."""
-    from markerplace.plan.score.success_model import calibration_curve, fit_success_model, roc_auc
-
     out = Path(out)
     summary, arrays, curves = {}, {}, {}
-    from markerplace.testbed.reporting.tables import md_text
 
     lines = [f"# {md_text(scene_name)}: does the score predict localization? (map images, leave-one-location-out)", "",
              "Each map image is localized against the map without the images of its own camera location, "

@@ -26,6 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, png_file_uri, png_uri, table, write_page
+from markerplace.plan.discretize.artifact import load as load_disc
+from markerplace.render.renderer import Renderer
+from markerplace.scene.worldframe import world_offset
+from markerplace.testbed import metrics
+from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, baseline_methods
+from markerplace.testbed.metrics import hit_mask, pose_errors_batch
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +45,6 @@ TRUE_BGR, PLAN_BGR, NONE_BGR = (40, 160, 40), (200, 0, 200), (200, 120, 0)
 
 
 def _plan_method(placements) -> str | None:
-    from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, baseline_methods
-
     methods = [p.method for p in placements if p.k > 0]
     if "omp" in methods:
         return "omp"
@@ -63,8 +67,6 @@ def gallery_selection(t_plan: np.ndarray, r_plan: np.ndarray, t_none: np.ndarray
         by the error without markers, largest (and failures) first; broken = the reverse, sorted
         by the error with the plan. Ties keep the test-image order.
     """
-    from markerplace.testbed.metrics import hit_mask
-
     hit_plan = hit_mask(t_plan, r_plan, *threshold)
     hit_none = hit_mask(t_none, r_none, *threshold)
 
@@ -131,12 +133,6 @@ def _view(rgb: np.ndarray | None, alt: str, caption: str) -> str:
 
 
 def _gallery(out: Path, scene, placements, predictions, test_poses, config, camera, threshold, label) -> str:
-    from markerplace.plan.discretize.artifact import load as load_disc
-    from markerplace.render.renderer import Renderer
-    from markerplace.scene.worldframe import world_offset
-    from markerplace.testbed.metrics import hit_mask, pose_errors_batch
-    from markerplace.testbed.marker_sets import NO_MARKERS
-
     method = _plan_method(placements)
     ts = config.test.sets[0]
     if method is None or not any(p.method == NO_MARKERS for p in placements):
@@ -215,8 +211,6 @@ def write_evaluation_report(out: str | Path, scene_name: str, placements, predic
         camera: :class:`~markerplace.geometry.Intrinsics` of the test images.
         scene: the scene (internal frame) to render the gallery; None = gallery without images.
     """
-    from markerplace.testbed import metrics
-
     t0 = time.perf_counter()
     out = Path(out)
     threshold = metrics.MAIN_THRESHOLD if metrics.MAIN_THRESHOLD in config.thresholds else config.thresholds[0]

@@ -13,6 +13,14 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
+from markerplace.report.figures import recall_vs_k
+from markerplace.runtime.atomic_io import write_json, write_npz
+from markerplace.runtime.cache import config_dict
+from markerplace.testbed import metrics
+from markerplace.testbed.environment import environment
+from markerplace.testbed.reporting.page import write_evaluation_report
+from markerplace.testbed.reporting.paired import paired_differences, paired_markdown, paired_table
+from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
 
 __all__ = ["write_outputs"]
 
@@ -36,13 +44,6 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     Returns:
         The recall rows and the markdown of the main table (first test set, main threshold).
     """
-    from markerplace.runtime.atomic_io import write_json, write_npz
-    from markerplace.report.figures import recall_vs_k
-    from markerplace.testbed.reporting.paired import paired_differences, paired_markdown, paired_table
-    from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
-    from markerplace.runtime.cache import config_dict
-    from markerplace.testbed import metrics
-
     results = {key: metrics.pose_errors_batch(est, test_poses[key.test_set].world_from_cam) for key, est in predictions.items()}
     labels = [metrics.threshold_label(t) for t in config.thresholds]
     rows = []
@@ -82,11 +83,9 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     curves = recall_curves(rows, scene_name, ts0, main, ks)
     if curves:
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
-    from markerplace.testbed.environment import environment
 
     write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config),
                                      "environment": environment()})
-    from markerplace.testbed.reporting.page import write_evaluation_report
 
     write_evaluation_report(out, scene_name, placements, predictions, test_poses, config, plan_config.imaging.camera,
                             scene=scene)
