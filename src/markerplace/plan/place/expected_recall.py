@@ -66,17 +66,9 @@ class _RecallProblem(GreedyProblem):
     def expected_gains(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(len(cands),) expected poses gained ``Delta(m | S)`` and mean information gain over
         all N poses (nats) of candidates ``cands``."""
-        cands = np.asarray(cands, dtype=np.int64)
-        dg = np.zeros(len(cands))
-        mg = np.zeros(len(cands))
-        nz, pidx, g, seg = self.pose_gains(cands)
-        if not np.any(nz):
-            return dg, mg
-        live = cands[nz]
-        dp = self.model.probability_increase(self.scores[pidx], g)
-        dg[nz] = np.bincount(seg, weights=dp, minlength=len(live))
-        mg[nz] = np.bincount(seg, weights=g, minlength=len(live)) / self.N
-        return dg, mg
+        nz, pidx, g, seg = self.pose_gains(np.asarray(cands, dtype=np.int64))
+        dp = self.model.probability_increase(self.scores[pidx], g) if len(g) else g
+        return self.segment_sums(nz, seg, dp), self.segment_sums(nz, seg, g) / max(self.N, 1)
 
 
 def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,

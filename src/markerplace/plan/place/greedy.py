@@ -193,17 +193,24 @@ class GreedyProblem:
         g = information_gain_whitened(self.linv[pidx], info)
         return nz, pidx, g, np.repeat(np.arange(len(live)), sizes[nz])
 
+    def segment_sums(self, nz: np.ndarray, seg: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """(len(nz),) sum of ``values`` per candidate (0 where ``nz`` is False), from the
+        flattened ``seg``/``values`` of :meth:`pose_gains`."""
+        out = np.zeros(len(nz))
+        if np.any(nz):
+            out[nz] = np.bincount(seg, weights=values, minlength=int(np.count_nonzero(nz)))
+        return out
+
     def evaluate(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q-th percentile gains and mean gains (nats) of candidates ``cands``."""
         cands = np.asarray(cands, dtype=np.int64)
         sizes = self.sizes[cands]
         qg = np.zeros(len(cands))
-        mg = np.zeros(len(cands))
         nz, _, g, seg = self.pose_gains(cands)
+        mg = self.segment_sums(nz, seg, g) / max(self.N, 1)
         if not np.any(nz):
             return qg, mg
         live = cands[nz]
-        mg[nz] = np.bincount(seg, weights=g, minlength=len(live)) / self.N
         # Per-segment k-th smallest: sort by (segment, gain); segments stay in place.
         srt = g[np.lexsort((g, seg))]
         starts = np.zeros(len(live), dtype=np.int64)
