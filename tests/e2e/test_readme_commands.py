@@ -23,7 +23,7 @@ from markerplace.cli.main import main
 from markerplace.scene.builtin.catalogue import builtin_names
 
 README = REPO / "README.md"
-FILE_SUFFIXES = (".json", ".ply", ".obj", ".glb", ".gltf")
+FILE_SUFFIXES = (".json", ".ply", ".obj", ".glb", ".gltf", ".toml")
 SCENE_COMMANDS = ("render", "plan", "evaluate", "study")
 
 
