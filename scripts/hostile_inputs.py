@@ -43,7 +43,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from helpers.interrupts import interrupt_cli  # noqa: E402  (tests/helpers: process-group signals, servers)
+from helpers.gltf import gltf_with_texture_uri  # noqa: E402
 from helpers.loopback import LoopbackServer  # noqa: E402
+from helpers.obj_files import latin1_room  # noqa: E402
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 FAR = np.array([1.0e6, 2.0e6, 0.0])
@@ -135,9 +137,8 @@ def make_fixtures(w: Path) -> dict:
     (w / "dir.glb").mkdir(exist_ok=True)
     gltf = w / "gltf"
     gltf.mkdir(exist_ok=True)
-    from test_mesh_sanity import _gltf_with_texture_uri
 
-    f["gltf_missing"] = _gltf_with_texture_uri(gltf / "room.gltf", "textures/wall.png")
+    f["gltf_missing"] = gltf_with_texture_uri(gltf / "room.gltf", "textures/wall.png")
     uni = w / "été ünïcode"
     uni.mkdir(exist_ok=True)
     shutil.copy(f["glb"], uni / "salle à manger.glb")
@@ -198,9 +199,7 @@ def make_fixtures(w: Path) -> dict:
     (w / "empty.glb").write_bytes(b"")
     lat = w / "latin1_mtl"
     lat.mkdir(exist_ok=True)
-    from test_checked_inputs import _latin1_room
-
-    f["latin1_mtl"] = _latin1_room(lat)
+    f["latin1_mtl"] = latin1_room(lat)
     return f
 
 

@@ -17,6 +17,7 @@ import pytest
 
 from helpers import FAST_2_YAWS as FAST
 from helpers.loopback import LoopbackServer
+from helpers.obj_files import latin1_room
 from markerplace.cli.main import OneLineParser, build_parser, main
 from markerplace.errors import UserError
 from markerplace.jsonfile import json_depth, read_json
@@ -299,28 +300,10 @@ def test_scene_export_refuses_a_name_that_is_not_glb(tmp_path, capsys):
     assert not (tmp_path / "x.txt").exists()
 
 
-def _latin1_room(folder: Path) -> Path:
-    """A 4 x 4 m room whose material names are Latin-1 (an OBJ comment that makes trimesh guess
-    ISO-8859-14 for the OBJ and Windows-1250 for the MTL, so ``Béton 3°`` differs between them)."""
-    names = ["Béton 3°", "Plâtre", "Bois", "Brique"]
-    colours = ["0.6 0.6 0.6", "0.9 0.9 0.9", "0.5 0.4 0.3", "0.7 0.2 0.1"]
-    quads = [[(0, 0, 0), (4, 0, 0), (4, 4, 0), (0, 4, 0)], [(0, 0, 0), (0, 0, 3), (4, 0, 3), (4, 0, 0)],
-             [(4, 0, 0), (4, 0, 3), (4, 4, 3), (4, 4, 0)], [(4, 4, 0), (4, 4, 3), (0, 4, 3), (0, 4, 0)]]
-    obj, n = ["# modèle exporté, 3° étage", "mtllib mat.mtl"], 0
-    for i, q in enumerate(quads):
-        obj += [f"o part{i}", f"usemtl {names[i]}"] + ["v %g %g %g" % p for p in q]
-        obj += [f"f {n + 1} {n + 2} {n + 3}", f"f {n + 1} {n + 3} {n + 4}"]
-        n += 4
-    mtl = [line for nm, c in zip(names, colours) for line in (f"newmtl {nm}", f"Kd {c}", "")]
-    (folder / "room.obj").write_bytes("\n".join(obj).encode("latin-1"))
-    (folder / "mat.mtl").write_bytes("\n".join(mtl).encode("latin-1"))
-    return folder / "room.obj"
-
-
 def test_latin1_material_names_keep_their_colours(tmp_path):
     from markerplace.scene.loader import load_mesh_file
 
-    scene = load_mesh_file(_latin1_room(tmp_path))
+    scene = load_mesh_file(latin1_room(tmp_path))
     colours = {p.name: tuple(round(c, 2) for c in p.base_color[:3]) for p in scene.parts}
     assert colours == {"Béton 3°": (0.6, 0.6, 0.6), "Plâtre": (0.9, 0.9, 0.9), "Bois": (0.5, 0.4, 0.3),
                        "Brique": (0.7, 0.2, 0.1)}

@@ -1,0 +1,25 @@
+"""``scripts/hostile_inputs.py`` (the new-user probe, about 5 minutes, not in the default run) still
+builds its hostile inputs and its cases: the cheap part of it, so that a moved test helper or a
+renamed option breaks the suite instead of the probe."""
+
+import importlib.util
+import sys
+
+from helpers import REPO
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("hostile_inputs", REPO / "scripts" / "hostile_inputs.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_probe_builds_its_inputs_and_cases(tmp_path):
+    probe = _script()
+    files = probe.make_fixtures(tmp_path)
+    assert files["latin1_mtl"].exists() and files["gltf_missing"].exists()
+    cases = probe.cases(tmp_path, files)
+    assert len(cases) > 50
+    assert len({c.name for c in cases}) == len(cases)  # --only picks cases by name
