@@ -13,6 +13,7 @@ from markerplace.cli.main import build_parser, main
 from markerplace.cli.options import plan_config_from_args
 from markerplace.plan.config import PlanConfig
 from markerplace.settings import NO_FLAG, NO_FLAG_SECTIONS, RUN_OPTIONS, flagged, walk
+from markerplace.pipelines.study import StudyPlan
 from markerplace.testbed.config import EvaluateConfig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,11 +26,13 @@ def _subparser(command: str) -> argparse.ArgumentParser:
 
 
 def _configs(command: str) -> dict[str, object]:
-    """prefix -> root config of a command (evaluate's own settings under ``evaluate.``)."""
-    return {"": PlanConfig(), **({"evaluate.": EvaluateConfig()} if command == "evaluate" else {})}
+    """prefix -> root config of a command (evaluate's own settings under ``evaluate.``, the
+    study's under ``study_plan.``)."""
+    return {"": PlanConfig(), **({"evaluate.": EvaluateConfig()} if command in ("evaluate", "study") else {}),
+            **({"study_plan.": StudyPlan()} if command == "study" else {})}
 
 
-@pytest.mark.parametrize("command", ["plan", "evaluate"])
+@pytest.mark.parametrize("command", ["plan", "evaluate", "study"])
 def test_every_flag_has_a_field_and_every_field_a_flag(command):
     flags = {a.option_strings[0] if a.option_strings else a.dest for a in _subparser(command)._actions
              if not isinstance(a, argparse._HelpAction)}
@@ -50,6 +53,20 @@ def test_every_flag_has_a_field_and_every_field_a_flag(command):
                 continue
             without.append(path)
     assert not without, f"config fields without a flag in {command} and not listed in settings.NO_FLAG: {without}"
+
+
+def test_study_options_come_from_fields(capsys):
+    """study's own options (StudyPlan) and the evaluation settings it shares (--k, --test-seed)
+    are generated; its --tests keeps the study's own default (300), evaluate's stays 200."""
+    args = build_parser().parse_args(["study", "tiny", "--out", "unused", "--vs", "80", "--k", "2,3"])
+    from markerplace.settings import apply, values_from_args
+
+    plan = apply(StudyPlan(), values_from_args(args, StudyPlan(), "study"))
+    assert plan.vs == (80.0,) and plan.tests == 300 and plan.shifts == (0.1, 0.25, 0.5)
+    assert values_from_args(args, EvaluateConfig(), "study") == {"study.ks": (2, 3)}
+    assert build_parser().parse_args(["evaluate", "tiny", "--out", "unused"]).tests == 200
+    assert main(["study", "tiny", "--out", "unused", "--vs", "120"]) == 2
+    assert "--vs" in capsys.readouterr().err
 
 
 def test_no_flag_lists_only_real_fields():

@@ -348,8 +348,12 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                  "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
                                           "method (checked before any work)"),
                  **_COMMON_RUN_OPTIONS},
+    "study": {**_SCENE_RUN_OPTIONS,
+              "--seed": ("0", "seeds the scene generator of built-ins and every evaluation of the study (as "
+                              "`evaluate --seed`)"),
+              "--out": None, **_COMMON_RUN_OPTIONS},
 }
-"""Options of ``plan`` and ``evaluate`` that set no config field: where the inputs are, where
+"""Options of ``plan``, ``evaluate`` and ``study`` that set no config field: where the inputs are, where
 the outputs go and how the run behaves; flag -> (the docs' default, the docs' text), None for
 either: from its ``--help``. Every other option is a config field's (:func:`setting`)."""
 
@@ -362,6 +366,13 @@ NO_FLAG: dict[str, str] = {
     "evaluate.thresholds": "the paper's recall thresholds",
     "evaluate.test.min_clearance": "a property of the test-pose sampler, not of an experiment",
     "evaluate.localization.vlad_clusters": "the localizer's codebook size, as published",
+    "placement.k@study": "a study places max(--k) markers (its --k is the list of budgets)",
+    "placement.method@study": "a study evaluates OMP",
+    **{f"evaluate.{path}@study": "a study fixes it (OMP against no markers, the published localizer, no "
+                                  "diagnostics) or varies it itself (--vs, --shifts, --scales, --no-detection-study)"
+       for path in ("test.tests", "test.sets", "study.methods", "study.runs", "study.tag_scale", "study.shift",
+                    "study.tag_ids", "localization.localizer", "localization.use_tags", "localization.tag_corners",
+                    "diagnostics.ceiling", "diagnostics.calibration")},
 }
 """Config fields of ``plan``/``evaluate`` that have no flag, with the reason (``path@command``:
 only in that command). Every field not listed here and not listed by :data:`NO_FLAG_SECTIONS`

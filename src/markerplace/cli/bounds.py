@@ -11,6 +11,7 @@ subcommand: one-line :class:`~markerplace.errors.UserError`, exit code 2.
 from __future__ import annotations
 
 from markerplace.errors import UserError
+from markerplace.pipelines.study import StudyPlan
 from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, HFOV, IMAGE_HEIGHT, IMAGE_WIDTH,
                                     MATCH_RADIUS, MAX_DT, SEED, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats,
                                     parse_int_list)
@@ -66,7 +67,7 @@ def _bounds() -> dict[str, dict[str, Bound]]:
             "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
             "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan")},
             "evaluate": {**plan, **evaluate},
-            "study": {**plan, "tests": evaluate["tests"], "test_seed": evaluate["test_seed"]},
+            "study": {**plan, **bounds_by_dest(configs["evaluate"], "study"), **bounds_by_dest(StudyPlan(), "study")},
             "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
         })
     return _BOUNDS

@@ -5,7 +5,7 @@ docs/cli.md; ``scripts/cli_docs.py`` rewrites them (:func:`rewrite`), and
 ``tests/test_settings.py`` fails when the file is out of date. An option of a config field takes
 its default and text from the field (:mod:`markerplace.settings`); a run option
 (:data:`~markerplace.settings.RUN_OPTIONS`) its docs text from there or its ``--help``.
-``evaluate``'s table lists only the options ``plan`` does not have.
+``evaluate``'s and ``study``'s tables list only the options ``plan`` does not have.
 """
 
 from __future__ import annotations
@@ -13,13 +13,14 @@ from __future__ import annotations
 import argparse
 import re
 from markerplace.cli.main import build_parser
+from markerplace.pipelines.study import StudyPlan
 from markerplace.plan.config import PlanConfig
 from markerplace.settings import RUN_OPTIONS, flagged, shown_default
 from markerplace.testbed.config import EvaluateConfig
 
 __all__ = ["option_table", "rewrite", "COMMANDS"]
 
-COMMANDS = ("plan", "evaluate")
+COMMANDS = ("plan", "evaluate", "study")
 
 
 def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
@@ -32,6 +33,8 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
 def _configs(command: str) -> list:
     if command == "evaluate":
         return [EvaluateConfig(), PlanConfig()]
+    if command == "study":
+        return [StudyPlan(), EvaluateConfig(), PlanConfig()]
     return [PlanConfig()]
 
 
@@ -62,7 +65,7 @@ def _rows(command: str) -> list[tuple[str, str, str]]:
 def option_table(command: str) -> str:
     """The markdown table of ``command``'s options."""
     rows = _rows(command)
-    if command == "evaluate":
+    if command in ("evaluate", "study"):
         plan = set(_rows("plan"))
         rows = [r for r in rows if r not in plan]
     lines = ["| option | default | meaning |", "|---|---|---|"]

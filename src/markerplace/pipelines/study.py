@@ -22,15 +22,18 @@ from __future__ import annotations
 
 import csv
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
+from markerplace.settings import setting
+from markerplace.validation import parse_float_list
 from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
-from markerplace.pipelines.evaluate import run_evaluation
+from markerplace.pipelines.evaluate import RunInputs, open_evaluation_folder, run_evaluation
 from markerplace.pipelines.plan import prepare
+from markerplace.plan.config import validate
 from markerplace.plan.place.stage import place
 from markerplace.report.figures import recall_vs_k
 from markerplace.testbed.metrics import hit_mask, main_threshold, threshold_label
@@ -38,14 +41,25 @@ from markerplace.testbed.reporting.paired import bootstrap_difference, format_di
 
 log = logging.getLogger(__name__)
 
-__all__ = ["StudyPlan", "study_runs", "run_study"]
+__all__ = ["StudyPlan", "study", "study_runs", "run_study"]
+
+
+def _float_list(name: str):
+    """``--vs``/``--shifts``/``--scales``: a comma list of numbers, each within the field's bounds."""
+
+    def convert(text) -> tuple[float, ...]:
+        leaf = next(f for f in fields(StudyPlan) if f.name == name).metadata["setting"]
+        return parse_float_list(text, leaf.flag, leaf.bound())
+
+    return convert
 
 
 @dataclass(frozen=True)
 class StudyPlan:
-    """The settings a study varies (defaults: the paper's).
+    """The settings a study varies (defaults: the paper's), each with its ``study`` option.
 
     Attributes:
+        tests: test images per test set of every evaluation of the study.
         vs: OMP's v values besides the planned one (paper: 99, 70, 50 against 90).
         shifts: position deviations along the wall, metres (paper: up to 1 m).
         scales: printed size factors (paper: sizes around the planned one).
@@ -53,11 +67,21 @@ class StudyPlan:
         similarity_off: include OMP planned without the similarity analysis.
     """
 
-    vs: tuple[float, ...] = (99.0, 70.0, 50.0)
-    shifts: tuple[float, ...] = (0.1, 0.25, 0.5)
-    scales: tuple[float, ...] = (0.5, 0.75, 1.25)
-    detection_off: bool = True
-    similarity_off: bool = True
+    tests: int = setting(300, flag="--tests", bounds=(1, 100_000), metavar="N", hint="test images per set, e.g. 300",
+                         help="test images per test set of every evaluation of the study")
+    vs: tuple[float, ...] = setting((99.0, 70.0, 50.0), flag="--vs", convert=_float_list("vs"), bounds=(0.0, 100.0),
+                                    units="%", hint="percentages such as 99,70,50",
+                                    help="OMP v values compared with the planned -v (each 0-100)")
+    shifts: tuple[float, ...] = setting((0.1, 0.25, 0.5), flag="--shifts", convert=_float_list("shifts"),
+                                        bounds=(0.0, 5.0), units="m", hint="distances in metres, e.g. 0.1,0.25",
+                                        help="tag shifts along the wall, metres (each 0-5)")
+    scales: tuple[float, ...] = setting((0.5, 0.75, 1.25), flag="--scales", convert=_float_list("scales"),
+                                        bounds=(0.1, 5.0), hint="factors such as 0.5,0.75,1.25",
+                                        help="printed size factors (each 0.1-5)")
+    detection_off: bool = setting(True, flag="--no-detection-study", const=False,
+                                  help="leave out the run without tag detection")
+    similarity_off: bool = setting(True, flag="--no-similarity-study", const=False,
+                                   help="leave out OMP planned without the similarity analysis")
 
 
 def _hits(run_dir: Path, test_set: str, threshold: tuple[float, float]) -> dict:
@@ -112,6 +136,18 @@ def study_runs(config, plan: StudyPlan) -> dict:
     for cfg in runs.values():
         validate_evaluate_config(cfg)
     return runs
+
+
+def study(scene_spec, plan_config, config, plan: StudyPlan, out_dir: str | Path,
+          inputs: RunInputs = RunInputs()) -> str:
+    """``markerplace study``: the settings checked, the study folder opened (with the run-size
+    guard's first guess for all its evaluations), then :func:`run_study`; returns ``study.md``."""
+    validate_evaluate_config(config)
+    validate(plan_config)
+    runs = 1 + len(plan.shifts) + len(plan.scales) + int(plan.detection_off)
+    run_config = open_evaluation_folder("study", out_dir, scene_spec, plan_config, config, inputs,
+                                        runs * len(config.study.ks))
+    return run_study(scene_spec, run_config, config, out_dir, plan, progress=inputs.progress)
 
 
 def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyPlan = StudyPlan(),

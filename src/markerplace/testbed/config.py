@@ -56,13 +56,13 @@ class TestSetConfig:
 
     __test__ = False
 
-    tests: int = setting(200, flag="--tests", bounds=(1, 100_000), metavar="N", help="test images per test set",
+    tests: int = setting(200, flag="--tests", commands=("evaluate",), bounds=(1, 100_000), metavar="N", help="test images per test set",
                          hint="test images per test set, e.g. 200")
-    sets: tuple[str, ...] = setting(TEST_SETS, flag="--test-sets", convert=_name_list,
+    sets: tuple[str, ...] = setting(TEST_SETS, flag="--test-sets", commands=("evaluate",), convert=_name_list,
                                     help="comma list of weighted (towards low scores) and uniform",
                                     doc="`weighted` draws test poses with the paper's weights w = 2 l* - mean(l) - l "
                                         "(more where scores are low); `uniform` draws uniformly")
-    seed: int | None = setting(None, flag="--test-seed", bounds=(0, SEED_MAX), metavar="N", shown_default="--seed",
+    seed: int | None = setting(None, flag="--test-seed", commands=("evaluate", "study"), bounds=(0, SEED_MAX), metavar="N", shown_default="--seed",
                                hint=f"a seed in 0..{SEED_MAX}, e.g. 3",
                                help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new "
                                     "test set without changing a built-in scene")
@@ -92,27 +92,27 @@ class StudyConfig:
             from ``order`` by test-image noise.
     """
 
-    methods: tuple[str, ...] = setting(default_factory=method_names, flag="--methods", convert=_name_list,
+    methods: tuple[str, ...] = setting(default_factory=method_names, flag="--methods", commands=("evaluate",), convert=_name_list,
                                        shown_default="all",
                                        help=lambda: "comma list of none (no markers) and placement methods: "
                                        + _placement_help(),
                                        doc="comma list of `none` (no markers) and registered placement methods by "
                                            "name (`omp`, `random`, `uniform`, `human`; `--help` lists them); "
                                            "default: none + every registered method")
-    runs: int = setting(5, flag="--runs", bounds=(1, 1000), hint="placements per random/uniform baseline, e.g. 5",
+    runs: int = setting(5, flag="--runs", commands=("evaluate",), bounds=(1, 1000), hint="placements per random/uniform baseline, e.g. 5",
                         help="placements per randomized method (seeds --placement-seed + run); the baselines of "
                              "the paired comparisons")
-    ks: tuple[int, ...] = setting((5, 10, 15, 20), flag="--k", convert=_int_list, bounds=(1, 10_000), integer=True,
+    ks: tuple[int, ...] = setting((5, 10, 15, 20), flag="--k", commands=("evaluate", "study"), convert=_int_list, bounds=(1, 10_000), integer=True,
                                   hint="positive marker counts, e.g. 5,10,15,20",
                                   help="comma list of marker budgets; OMP is greedy, so its k = 5 placement is the "
                                        "prefix of its k = 20 one")
-    tag_scale: float = setting(1.0, flag="--tag-scale", bounds=(0.1, 5.0), metavar="S",
+    tag_scale: float = setting(1.0, flag="--tag-scale", commands=("evaluate",), bounds=(0.1, 5.0), metavar="S",
                                hint="a factor in [0.1, 5], e.g. 1.25",
                                help="print tags S times the planned size (sensitivity study)")
-    shift: float = setting(0.0, flag="--shift", bounds=(0.0, 5.0), units="m", metavar="D",
+    shift: float = setting(0.0, flag="--shift", commands=("evaluate",), bounds=(0.0, 5.0), units="m", metavar="D",
                            hint="a distance in [0, 5] metres, e.g. 0.1",
                            help="move every marker along its wall by +-D metres, alternating sign (sensitivity study)")
-    tag_ids: str = setting("order", flag="--tag-ids", choices=lambda: TAG_IDS,
+    tag_ids: str = setting("order", flag="--tag-ids", commands=("evaluate",), choices=lambda: TAG_IDS,
                            help="tag codes drawn: order (ids 0..k-1 in each placement's order, as every documented "
                                 "result) or candidate (id = candidate spot, the same in every placement, so "
                                 "placements share renders: cheaper ceilings and multi-k runs, results differ by "
@@ -130,13 +130,13 @@ class LocalizationConfig:
         vlad_clusters: k-means clusters of the VLAD codebook (trained on the no-marker map).
     """
 
-    localizer: str = setting("sift_pnp", flag="--localizer", choices=lambda: _localizers().names(),
+    localizer: str = setting("sift_pnp", flag="--localizer", commands=("evaluate",), choices=lambda: _localizers().names(),
                              help=lambda: f"localizer of the test images: {_localizers().help()}",
                              doc="a registered localizer (today one: tags + VLAD retrieval + SIFT matching + P3P "
                                  "RANSAC + LM refinement)")
-    use_tags: bool = setting(True, flag="--no-tags", const=False,
+    use_tags: bool = setting(True, flag="--no-tags", commands=("evaluate",), const=False,
                              help="localize without tag detection (paper's parameter study)")
-    tag_corners: bool = setting(False, flag="--tag-corners", const=True,
+    tag_corners: bool = setting(False, flag="--tag-corners", commands=("evaluate",), const=True,
                                 help="also use detected tag corners as 2D-3D matches (beyond the paper)")
     vlad_clusters: int = 64
 
@@ -153,7 +153,7 @@ class DiagnosticsConfig:
             (:mod:`markerplace.testbed.calibration`).
     """
 
-    ceiling: bool = setting(False, flag="--ceiling", const=True,
+    ceiling: bool = setting(False, flag="--ceiling", commands=("evaluate",), const=True,
                             help="oracle ceiling: every candidate evaluated alone on the test images, the greedy "
                                  "best k evaluated as a placement (a diagnostic that uses the test images, never a "
                                  "method); writes ceiling.md and adds 'ceiling' rows",
@@ -164,7 +164,7 @@ class DiagnosticsConfig:
                                 "it, and says how much of the ceiling's lead is selection on the test images (picks "
                                 "made on a random half of them scored on the other half, against picks made on that "
                                 "half: the `held out` and `in sample` rows, 100 splits seeded by `--seed`)")
-    calibration: bool = setting(False, flag="--calibration", const=True,
+    calibration: bool = setting(False, flag="--calibration", commands=("evaluate",), const=True,
                                 help="localize every map image against the rest of the map (leave one location out) "
                                      "without and with each placement's tags, and report how well the score "
                                      "predicts success per marker model: calibration.md, calibration.png, "
