@@ -54,6 +54,14 @@ def validate(config: PlanConfig) -> None:
     if p.calibration_poses not in CALIBRATION_POSES:
         raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
+    if p.target_recall is not None:
+        if not p.target_recall > 0.0:
+            raise UserError(f"--target-recall {p.target_recall:g} must be above 0: give a share of camera poses in "
+                            "(0, 1], e.g. 0.9")
+        if not PLACEMENT_METHODS.lookup(p.method).nested:
+            nested = ", ".join(n for n, c in PLACEMENT_METHODS.items() if c.nested)
+            raise UserError(f"--target-recall needs a method whose first tags are its smaller plans ({nested}), "
+                            f"not --method {p.method}")
 
 
 def warn_unused_settings(config: PlanConfig) -> None:
