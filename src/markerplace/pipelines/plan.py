@@ -133,8 +133,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     warn_unused_settings(config)
     existing = load_markers(inputs.existing, "--existing") if inputs.existing else []
     target = config.placement.target_recall  # then k is the most tags (place_for_target)
-    if target is None:
-        check_tag_budget(k, existing, config.placement.first_tag_id)
+    check_tag_budget(k if target is None else 1, existing, config.placement.first_tag_id)
     exclusion = load_exclusion(inputs.exclude) if inputs.exclude else None
     previous = previous_markers(out, scene_spec.spec)  # to say what this run changes
     run_folder.open_run_folder(out, "plan", adopt=inputs.adopt)
@@ -156,11 +155,13 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     if exclusion is not None:
         data = apply_exclusion(data, exclusion, offset, 1 if target is not None else k)
     if target is None:
-        placement, reached = place(data, config.placement, existing=existing, progress=inputs.progress), None
+        placement, target_info = place(data, config.placement, existing=existing, progress=inputs.progress), None
     else:
-        placement, reached = place_for_target(data, config.placement, existing, inputs.progress)
-    predicted = {"predicted_recall": predicted_recall(data, placement, config.placement, reached),
+        placement, target_info = place_for_target(data, config.placement, existing, inputs.progress)
+    t0 = time.perf_counter()
+    predicted = {"predicted_recall": predicted_recall(data, placement, config.placement, target_info),
                  "score_bound": score_bound(data, placement)}
+    data.timings["predicted recall and bounds"] = time.perf_counter() - t0
     summary = write_plan_outputs(out, data=data, placement=placement, first_gain=first_pick_gain(data, placement),
                                  config=config, method=config.placement.method, scene_source=scene_spec.spec,
                                  scene=scene, existing=existing, world_offset=offset, paper=inputs.paper,

@@ -16,6 +16,7 @@ from markerplace.imaging.config import ImagingConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.plan.place.predicted import wants_success_model
 from markerplace.plan.score.localizability import NoiseConfig
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.similarity.config import SimilarityConfig
@@ -67,6 +68,6 @@ def validate(config: PlanConfig) -> None:
 def warn_unused_settings(config: PlanConfig) -> None:
     """Log a warning for each setting that has no effect with the chosen method."""
     p = config.placement
-    if p.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(p.method).calibrated:
+    if p.calibration_poses != "map" and not wants_success_model(p):
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
-                    "model)", p.calibration_poses, p.method)
+                    "model; so do --target-recall and --recall-curve)", p.calibration_poses, p.method)

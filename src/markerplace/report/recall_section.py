@@ -36,7 +36,8 @@ def curve_svg(recall: list[float], knee: int | None = None, target: float | None
              f'<rect x="{_L}" y="{_T}" width="{_W - _L - _R}" height="{_H - _T - _B}" fill="none" stroke="#999"/>']
     for frac in (0.0, 0.25, 0.5, 0.75, 1.0):
         r = lo + frac * span
-        parts.append(f'<text x="{_L - 4}" y="{y(r) + 4:.1f}" text-anchor="end">{100 * r:.0f} %</text>')
+        parts.append(f'<text x="{_L - 4}" y="{y(r) + 4:.1f}" text-anchor="end">{100 * r:.{0 if span >= 0.2 else 1}f} '
+                     '%</text>')
     step = max(1, round(K / 10))
     for k in range(0, K + 1, step):
         parts.append(f'<text x="{x(k):.1f}" y="{_H - _B + 14}" text-anchor="middle">{k}</text>')
@@ -91,7 +92,7 @@ def recall_section(doc: dict) -> str:
             out.append(f"<p>{_target_words(t)}</p>")
         out.append(f"<p class=\"note\">Upper bound: no {ub['k']} candidates reach more than "
                    f"<b>{100 * ub['recall']:.1f} %</b> predicted recall; this plan has {100 * ub['plan_recall']:.1f} "
-                   f"%. {esc(ub['what'])}.</p>")
+                   f"%. Why it holds: {esc(ub['what'])}.</p>")
         rows = [[k, round(100 * r, 2), "" if k == 0 else round(100 * (r - rec[k - 1]), 2)] for k, r in enumerate(rec)]
         out.append("<details><summary>the curve's values</summary>"
                    + table(["tags", "predicted recall (%)", "added (points)"], rows) + "</details>")
