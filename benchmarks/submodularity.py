@@ -6,7 +6,8 @@ and prints the share where ``Delta(m | S) < Delta(m | T)``, the worst excess, an
 sampled submodularity ratio (Das & Kempe; a sampled minimum over-estimates the true ratio, so it
 is a diagnostic, never a bound), for F and for the mean score (submodular: 0 violations). Then
 the expected-recall greedy's predicted recall at k against the valid per-pose upper bound of
-any k tags (:func:`markerplace.plan.place.bounds.recall_upper_bound`).
+any k tags (:func:`markerplace.plan.place.bounds.recall_upper_bound`) and, where there are at
+most 5000 k-subsets, the true best k-set by exhaustive search.
 
 Two sources: random synthetic problems with the logistic's midpoint ``--above`` nats over the
 median pose score (default), or a plan folder made by ``plan --recall-curve`` (or
@@ -20,7 +21,9 @@ the same scene and settings the plan had: defaults only).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +39,9 @@ from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel
 from markerplace.plan.types import MarkerCoverage
 from markerplace.scene.spec import SceneSpec
+
+EXHAUSTIVE_MAX = 5000
+"""Largest number of k-subsets searched for the true best k-set."""
 
 
 def synthetic(seed: int, N: int, C: int, above: float, slope: float):
@@ -75,8 +81,12 @@ def report(name: str, base, covs, model, trials: int, ks: list[int], seed: int) 
         order = expected_recall_greedy(base, covs, k, model).order
         got = recall_curve(base, covs, order, model)[-1]
         ub = recall_upper_bound(base, covs, order, k, model)
+        opt = ""
+        if math.comb(C, k) <= EXHAUSTIVE_MAX:
+            best = max(recall_curve(base, covs, T, model)[-1] for T in itertools.combinations(range(C), k))
+            opt = f", best {k}-set (exhaustive) {100 * best:.2f} %"
         print(f"  k={k}: greedy predicted recall {100 * got:.2f} %, upper bound of any {k} tags {100 * ub:.2f} % "
-              f"(ratio {got / ub if ub > 0 else float('nan'):.3f})")
+              f"(ratio {got / ub if ub > 0 else float('nan'):.3f}){opt}")
 
 
 def main() -> None:
