@@ -202,10 +202,16 @@ def load_markers(path: str | Path, option: str | None = None,
     return markers
 
 
+def free_tag_ids(existing: list[Marker], first_tag_id: int = 0) -> int:
+    """How many new tags can get ids of their own in tag36h11 (ids count up from
+    ``first_tag_id``, skipping the ``existing`` ones); may be <= 0."""
+    return NUM_TAGS - first_tag_id - sum(1 for m in existing if m.tag_id >= first_tag_id)
+
+
 def check_tag_budget(k: int, existing: list[Marker], first_tag_id: int = 0) -> None:
     """Refuse a plan whose ``k`` new tags cannot get ids of their own in tag36h11 next to the
     ``existing`` ones (placed ids count up from ``first_tag_id``, skipping existing ids)."""
-    free = NUM_TAGS - first_tag_id - sum(1 for m in existing if m.tag_id >= first_tag_id)
+    free = free_tag_ids(existing, first_tag_id)
     if k > free:
         raise UserError(f"-k {k}: {FAMILY} has {NUM_TAGS} ids and {len(existing)} are taken by existing tags, so at most "
                         f"{max(free, 0)} new tags can be placed")

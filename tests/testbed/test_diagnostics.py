@@ -139,7 +139,19 @@ def test_expected_recall_plan_is_calibrated_on_map_images_and_cached(tmp_path):
     stamp = model_file.stat().st_mtime_ns
     assert main(args) == 0  # the calibration stage is reused
     assert model_file.stat().st_mtime_ns == stamp
-    assert json.loads((out / "placement.json").read_text())["markers"] == placed
+    doc = json.loads((out / "placement.json").read_text())
+    assert doc["markers"] == placed
+    pr = doc["predicted_recall"]
+    assert pr["available"] and pr["k"] == [0, 1, 2, 3] and pr["target"] is None
+    assert pr["recall"] == sorted(pr["recall"]) and pr["upper_bound"]["recall"] >= pr["recall"][-1]
+    # --target-recall with OMP on the same folder: the fit is reused (where the greedy stops is no part of it)
+    assert main(["plan", "tiny", "--target-recall", "1.0", "--out", str(out), *FAST]) == 0
+    assert model_file.stat().st_mtime_ns == stamp
+    doc = json.loads((out / "placement.json").read_text())
+    t = doc["predicted_recall"]["target"]
+    assert t["target"] == 1.0 and not t["reached"] and t["limit"] == "with the candidates"
+    assert len(doc["markers"]) == t["tags"] == t["best_tags"] and t["most_tags"] == doc["summary"]["num_candidates"]
+    assert "How many tags" in (out / "report.html").read_text() and "not reachable" in (out / "report.html").read_text()
 
 
 def test_expected_recall_offgrid_calibration_fits_on_test_like_renders(tmp_path, monkeypatch):
@@ -201,6 +213,10 @@ def test_calibration_poses_without_expected_recall_warns(tmp_path, caplog):
         assert main(["plan", "tiny", "-k", "2", "--calibration-poses", "offgrid", "--out", str(tmp_path / "p"), *FAST]) == 0
     assert any("--calibration-poses offgrid has no effect with --method omp" in r.getMessage() for r in caplog.records)
     assert not (tmp_path / "p" / "success_model_expected-recall.json").exists()
+    doc = json.loads((tmp_path / "p" / "placement.json").read_text())  # no model: the curve says how to get it
+    assert doc["predicted_recall"]["available"] is False and "--recall-curve" in doc["predicted_recall"]["how"]
+    sb = doc["score_bound"]
+    assert sb["k"] == 2 and sb["mean_score_upper_bound"] >= sb["mean_score_plan"] >= sb["mean_score_existing"]
 
 
 def test_unknown_calibration_poses_is_a_one_line_error(tmp_path, capsys):

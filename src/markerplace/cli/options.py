@@ -19,6 +19,7 @@ from dataclasses import replace
 from markerplace.config_file import read_config_file
 from markerplace.markers import check_tag_budget
 from markerplace.plan.config import PlanConfig
+from markerplace.plan.place.config import K_ALL
 from markerplace.plan.discretize.candidate_rules import parse_allow as parse
 from markerplace.settings import add_setting_args, apply, values_from_args
 
@@ -45,11 +46,22 @@ def parse_allow(text: str | None) -> tuple[str, ...]:
 def plan_config_from_args(args: argparse.Namespace):
     """Build a :class:`~markerplace.plan.config.PlanConfig` from ``plan``/``evaluate``/``study``
     arguments: the defaults, then ``--config FILE`` (``plan``; :mod:`markerplace.config_file`),
-    then every option of a config field that was given (:mod:`markerplace.settings`)."""
-    config = PlanConfig()
+    then every option of a config field that was given (:mod:`markerplace.settings`).
+
+    With a target recall (``--target-recall`` or the file's ``target_recall``) and no k from
+    the command line or the file, k is :data:`~markerplace.plan.place.config.K_ALL`: the plan is
+    bounded by the candidates and the free tag ids alone."""
+    command = getattr(args, "command", None) or "plan"
+    config, file_k = PlanConfig(), False
     if getattr(args, "config", None):
-        config = read_config_file(args.config, config)
-    return apply(config, values_from_args(args, config, getattr(args, "command", None) or "plan"))
+        read = read_config_file(args.config, apply(config, {"placement.k": None}))  # None: the file gives no k
+        file_k = read.placement.k is not None
+        config = read if file_k else apply(read, {"placement.k": config.placement.k})
+    given = values_from_args(args, config, command)
+    config = apply(config, given)
+    if config.placement.target_recall is not None and not file_k and "placement.k" not in given:
+        config = apply(config, {"placement.k": K_ALL})
+    return config
 
 
 def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):

@@ -30,6 +30,7 @@ from markerplace.plan.discretize.exclusion import (apply_exclusion, describe_cha
 from markerplace.plan.discretize.stage import run_discretize
 from markerplace.plan.observe import run_observe
 from markerplace.plan.place.greedy import check_k
+from markerplace.plan.place.predicted import model_methods, place_for_target, predicted_recall, score_bound
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity
@@ -119,7 +120,10 @@ class PlanResult:
 
 
 def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs: PlanInputs = PlanInputs()) -> PlanResult:
-    """Plan ``config.placement.k`` tags in the scene and write every deliverable into ``out``.
+    """Plan ``config.placement.k`` tags in the scene (with ``target_recall``: as many as reach
+    it, k at most: :func:`~markerplace.plan.place.predicted.place_for_target`) and write every
+    deliverable into ``out``; placement.json and report.html carry the predicted recall against
+    k where the success model was fitted (:func:`~markerplace.plan.place.predicted.wants_success_model`).
 
     Every input is read and checked before any work; the folder is then opened as this run's
     (marked, locked, only markerplace's own files rewritten: :mod:`markerplace.runtime.run_folder`).
@@ -128,7 +132,8 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     validate(config)
     warn_unused_settings(config)
     existing = load_markers(inputs.existing, "--existing") if inputs.existing else []
-    check_tag_budget(k, existing, config.placement.first_tag_id)
+    target = config.placement.target_recall  # then k is the most tags (place_for_target)
+    check_tag_budget(k if target is None else 1, existing, config.placement.first_tag_id)
     exclusion = load_exclusion(inputs.exclude) if inputs.exclude else None
     previous = previous_markers(out, scene_spec.spec)  # to say what this run changes
     run_folder.open_run_folder(out, "plan", adopt=inputs.adopt)
@@ -141,17 +146,28 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     run_config = check_first_guess(config, scene, inputs.force)  # also moves --start into the scene frame
     with make_executor(run_config.runtime) as executor:
         size_check = measured_size_check(scene, scene_spec, run_config, k, force=inputs.force)
-        data = prepare(scene_spec, run_config, out, existing, inputs.progress, executor, k, size_check)
-        check_k(k, data.num_candidates)  # before calibrating for nothing
-        calibrate_plan(scene_spec, data, run_config, out, executor, progress=inputs.progress)
+        data = prepare(scene_spec, run_config, out, existing, inputs.progress, executor,
+                       None if target is not None else k, size_check)
+        if target is None:
+            check_k(k, data.num_candidates)  # before calibrating for nothing
+        calibrate_plan(scene_spec, data, run_config, out, executor, model_methods(config.placement),
+                       progress=inputs.progress)
     if exclusion is not None:
-        data = apply_exclusion(data, exclusion, offset, k)
-    placement = place(data, config.placement, existing=existing, progress=inputs.progress)
+        data = apply_exclusion(data, exclusion, offset, 1 if target is not None else k)
+    if target is None:
+        placement, target_info = place(data, config.placement, existing=existing, progress=inputs.progress), None
+    else:
+        placement, target_info = place_for_target(data, config.placement, existing, inputs.progress)
+    t0 = time.perf_counter()
+    predicted = {"predicted_recall": predicted_recall(data, placement, config.placement, target_info),
+                 "score_bound": score_bound(data, placement)}
+    data.timings["predicted recall and bounds"] = time.perf_counter() - t0
     summary = write_plan_outputs(out, data=data, placement=placement, first_gain=first_pick_gain(data, placement),
                                  config=config, method=config.placement.method, scene_source=scene_spec.spec,
                                  scene=scene, existing=existing, world_offset=offset, paper=inputs.paper,
                                  scene_options={"up": scene_spec.up, "unit_scale": scene_spec.unit_scale,
-                                                "seed": scene_spec.seed}, exclusion=exclusion)
+                                                "seed": scene_spec.seed}, exclusion=exclusion,
+                                 predicted=predicted)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])

@@ -278,7 +278,8 @@ def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = Fa
         N = len(disc.world_from_cam)
         sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
         workers = default_workers(plan_config.runtime.workers)
-        stages = estimate_plan(sample, N, workers, plan_config.similarity, k, plan_config.placement.similarity)
+        tags = min(k, len(disc.candidate_world_from_marker))  # a --target-recall plan's k is only a bound
+        stages = estimate_plan(sample, N, workers, plan_config.similarity, tags, plan_config.placement.similarity)
         estimate = estimate_run(scene, plan_config, evaluate_config, extra_placements, poses=N,
                                 seconds_per_pose=sample.seconds_per_pose)
         evaluation = 0.0

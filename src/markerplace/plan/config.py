@@ -16,6 +16,7 @@ from markerplace.imaging.config import ImagingConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.plan.place.predicted import wants_success_model
 from markerplace.plan.score.localizability import NoiseConfig
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.similarity.config import SimilarityConfig
@@ -54,11 +55,19 @@ def validate(config: PlanConfig) -> None:
     if p.calibration_poses not in CALIBRATION_POSES:
         raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
+    if p.target_recall is not None:
+        if not p.target_recall > 0.0:
+            raise UserError(f"--target-recall {p.target_recall:g} must be above 0: give a share of camera poses in "
+                            "(0, 1], e.g. 0.9")
+        if not PLACEMENT_METHODS.lookup(p.method).nested:
+            nested = ", ".join(n for n, c in PLACEMENT_METHODS.items() if c.nested)
+            raise UserError(f"--target-recall needs a method whose first tags are its smaller plans ({nested}), "
+                            f"not --method {p.method}")
 
 
 def warn_unused_settings(config: PlanConfig) -> None:
     """Log a warning for each setting that has no effect with the chosen method."""
     p = config.placement
-    if p.calibration_poses != "map" and not PLACEMENT_METHODS.lookup(p.method).calibrated:
+    if p.calibration_poses != "map" and not wants_success_model(p):
         log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
-                    "model)", p.calibration_poses, p.method)
+                    "model; so do --target-recall and --recall-curve)", p.calibration_poses, p.method)

@@ -91,7 +91,7 @@ def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, m
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
                        scene_source: str, scene, existing: Sequence = (), world_offset=None, paper: str = "a4",
-                       scene_options: dict | None = None, exclusion=None) -> dict:
+                       scene_options: dict | None = None, exclusion=None, predicted: dict | None = None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
 
     ``scene`` (internal frame) is measured for the installer's instructions (each marker's
@@ -102,6 +102,8 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     so ``export`` and ``check`` can rebuild the run, and set the tag maps' file axes
     (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
     :class:`~markerplace.plan.discretize.exclusion.Exclusion`, user frame) goes there too.
+    ``predicted`` (``predicted_recall`` and ``score_bound``,
+    :mod:`markerplace.plan.place.predicted`) goes into placement.json as it is.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -138,7 +140,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         r["install"] = install_to_frame(inst, world_offset)
     for r, sh in zip(records, sheet_plan(records, paper)):  # where each tag is in tags.pdf
         r["install"].update(pages=sh.pages, tiles=list(sh.tiles))
-    write_placement(out_dir, records, scene_source, method, {"summary": summary})
+    write_placement(out_dir, records, scene_source, method, {"summary": summary, **(predicted or {})})
 
     write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,

@@ -190,7 +190,8 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         map_poses = np.asarray(data.disc.world_from_cam, float)
         base_key = map_base_key(scene_spec.load(), map_poses)
         tag_size = plan_config.placement.tag_size
-        fit_conf = conf if offgrid else replace(conf, calibration_images=0)  # unused by a map fit
+        fit_conf = replace(conf, target_recall=None)  # where the greedy stops is no part of the fit
+        fit_conf = fit_conf if offgrid else replace(fit_conf, calibration_images=0)  # unused by a map fit
         queries = offgrid_poses(data, plan_config.discretize.grid_spacing, conf.calibration_images,
                                 conf.calibration_seed) if offgrid else None
         key = cache.hash_of("calibration-v2", base_key, imaging, lcfg, localization.vlad_clusters, data.base_score,

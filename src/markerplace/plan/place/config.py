@@ -12,6 +12,10 @@ from markerplace.settings import SEED_MAX, setting
 CALIBRATION_POSES = ("map", "offgrid")
 """Images ``expected-recall`` may fit its success model on (``--calibration-poses``)."""
 
+K_ALL = 10_000
+"""``k`` of a ``--target-recall`` plan given no ``-k``: the largest -k, so that only the
+candidates and the free tag ids bound the plan."""
+
 
 @dataclass(frozen=True)
 class PlacementConfig:
@@ -38,6 +42,15 @@ class PlacementConfig:
             without its own location) or ``offgrid`` (renders at test-like poses, map poses
             perturbed within a grid cell and +-22.5 deg of yaw, localized against the whole
             map; :mod:`markerplace.testbed.calibration`).
+        target_recall: place tags until the predicted recall (share of feasible camera poses
+            predicted to localize under the success model fitted on the map images,
+            :mod:`markerplace.plan.place.recall_curve`) reaches this share, in (0, 1]; ``k`` is
+            then the most tags (without ``-k`` on the command line: every candidate). Needs a
+            nested method (``omp``, ``expected-recall``). None: place ``k`` tags.
+        recall_curve: fit the success model for any method, so that ``report.html`` and
+            ``placement.json`` show the predicted recall against k (calibration renders and
+            localizes the map images: :func:`markerplace.testbed.calibration.calibrate_plan`).
+            Always on with ``expected-recall`` or ``target_recall``.
     """
 
     k: int = setting(20, flag="-k", bounds=(1, 10_000), commands=("plan",), help="number of markers to place",
@@ -68,3 +81,14 @@ class PlacementConfig:
                                      help="images expected-recall fits its success model on: map (the map images, "
                                           "each without its own location) or offgrid (1000 test-like renders "
                                           "between the map poses, never test images)")
+    target_recall: float | None = setting(
+        None, flag="--target-recall", bounds=(0.0, 1.0), commands=("plan",), metavar="R",
+        hint="a share of camera poses in (0, 1], e.g. 0.9",
+        help="place tags until the predicted share of camera poses that localize reaches R (0 < R <= 1), under "
+             "the success model fitted on the map images; -k, if given, is the most tags (else every candidate); "
+             "omp or expected-recall")
+    recall_curve: bool = setting(
+        False, flag="--recall-curve", const=True, commands=("plan",),
+        help="fit the success model (renders and localizes the map images) for any method, so that report.html "
+             "and placement.json show the predicted recall against the number of tags; always on with "
+             "expected-recall or --target-recall")

@@ -30,6 +30,7 @@ import numpy as np
 
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.place.greedy import GreedyProblem, PlacementResult, check_k
+from markerplace.plan.place.recall_curve import NEGLIGIBLE
 from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.score.success_model import SuccessModel
 
@@ -74,8 +75,8 @@ class _RecallProblem(GreedyProblem):
 def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,
                            model: SuccessModel,
                            existing: Sequence[MarkerCoverage] | None = None,
-                           progress: Callable[[int, int, int, float], None] | None = None
-                           ) -> PlacementResult:
+                           progress: Callable[[int, int, int, float], None] | None = None,
+                           stop_at: float | None = None) -> PlacementResult:
     """Greedy placement maximizing the expected number of poses that localize (plain greedy).
 
     Each of the k rounds evaluates ``Delta(m | S)`` (module docstring) for every remaining
@@ -93,9 +94,13 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
             ``base_info`` before the greedy starts (they are not candidates).
         progress: optional callback ``progress(i, k, candidate, gain)`` after each pick (gain
             in expected poses).
+        stop_at: expected poses that localize to stop at (``plan --target-recall``: the target
+            share times N): the greedy stops after the first pick that reaches it, or before a
+            pick that would add no more than :data:`~markerplace.plan.place.recall_curve.NEGLIGIBLE`
+            of the poses (at least one pick is made); k is then the most picks. None: k picks.
 
     Returns:
-        :class:`PlacementResult` with ``order``; ``gains`` = expected poses gained by each pick
+        :class:`PlacementResult` with ``order`` (k picks, fewer with ``stop_at``); ``gains`` = expected poses gained by each pick
         when picked (poses, >= 0, so the objective never decreases); ``mean_gains`` = mean
         information gain over all N poses of each pick when picked (nats); ``eligible`` all
         True; ``q`` = NaN (no percentile); ``evaluations`` = candidate evaluations performed;
@@ -119,6 +124,7 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
     means: list[float] = []
     evaluations = 0
     remaining = np.ones(C, dtype=bool)
+    expected = float(np.sum(model.probability(prob.scores)))
     for it in range(k):
         cands = np.flatnonzero(remaining)
         dg, mg = prob.expected_gains(cands)
@@ -126,17 +132,23 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
         # the largest expected gain; equal ones (e.g. a constant model: all zero) go to the
         # larger mean information gain, then to the smallest index (cands ascending)
         i = int(np.lexsort((-mg, -dg))[0])
+        if stop_at is not None and order and dg[i] <= NEGLIGIBLE * N:
+            log.info("expected_recall_greedy: no candidate adds anything after %d picks", len(order))
+            break
         m = int(cands[i])
         remaining[m] = False
         prob.add(coverages[m])
         order.append(m)
         gains.append(float(dg[i]))
         means.append(float(mg[i]))
+        expected += float(dg[i])
         if progress is not None:
             progress(it, k, m, float(dg[i]))
+        if stop_at is not None and expected >= stop_at - 1e-12 * max(N, 1):
+            break
     log.info("expected_recall_greedy: placed %d markers, +%.3f expected poses of %d "
-             "(%d evaluations)", k, float(sum(gains)), N, evaluations)
-    return PlacementResult(order, gains, means, [True] * k, float("nan"), evaluations, lam)
+             "(%d evaluations)", len(order), float(sum(gains)), N, evaluations)
+    return PlacementResult(order, gains, means, [True] * len(order), float("nan"), evaluations, lam)
 
 
 __all__ = ["expected_localized", "expected_recall_greedy"]

@@ -290,6 +290,9 @@ class ExpectedRecall(PlacementMethod):
                 ``offgrid`` (test-like renders, ``PlacementConfig.calibration_poses``,
                 ``--calibration-poses``).
             calibration_images: off-grid images drawn (``offgrid`` only; default 1000).
+            target_recall: stop once the expected share of poses that localize reaches it, or
+                when no candidate adds anything (``PlacementConfig.target_recall``; default None:
+                k picks). Not part of the fit.
         """
 
         tag_model: str = "corners"
@@ -298,6 +301,7 @@ class ExpectedRecall(PlacementMethod):
         calibration_seed: int = 0
         calibration_poses: str = "map"
         calibration_images: int = 1000
+        target_recall: float | None = None
 
     default_conf = Config()
 
@@ -312,8 +316,10 @@ class ExpectedRecall(PlacementMethod):
             log.info("expected-recall pick %d/%d: candidate %d, +%.2f expected poses", i + 1, k, candidate, gain)
 
         covs = fit["coverages"]
+        target = self.conf.target_recall
         res = expected_recall_greedy(data.base_info, covs[:C], k, fit["model"], existing=covs[C:],
-                                     progress=report if progress else None)
+                                     progress=report if progress else None,
+                                     stop_at=None if target is None else float(target) * len(data.base_info))
         return Choice(np.asarray(res.order, dtype=np.int64), np.asarray(res.gains, dtype=float), float("nan"),
                       res.info_after)
 
