@@ -364,6 +364,8 @@ NO_FLAG: dict[str, str] = {
     "placement.method@evaluate": "evaluate runs every method of --methods",
     "placement.target_recall@evaluate": "evaluate places its --k budgets (a recall target is a plan's)",
     "placement.recall_curve@evaluate": "evaluate measures recall on test images (the predicted curve is a plan's)",
+    "placement.target_recall@study": "a study places its --k budgets (a recall target is a plan's)",
+    "placement.recall_curve@study": "a study measures recall on test images (the predicted curve is a plan's)",
     "evaluate.seed": "the scene argument's --seed (a run option) seeds it",
     "evaluate.thresholds": "the paper's recall thresholds",
     "evaluate.test.min_clearance": "a property of the test-pose sampler, not of an experiment",
