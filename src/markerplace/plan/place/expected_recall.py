@@ -29,7 +29,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.greedy import GreedyProblem, PlacementResult, check_k
+from markerplace.plan.place.greedy import apply_coverages, GreedyProblem, PlacementResult, check_k
 from markerplace.plan.place.recall_curve import NEGLIGIBLE
 from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.score.success_model import SuccessModel
@@ -111,10 +111,8 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
     """
     C = len(coverages)
     k = check_k(k, C)
-    lam = np.array(base_info, dtype=float, copy=True)
+    lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    for ex in existing or ():
-        lam[ex.pose_idx] += ex.info
     prob = _RecallProblem(lam, coverages, model)
     log.debug("expected_recall_greedy: N=%d C=%d k=%d, expected localized before %.3f",
               N, C, k, float(np.sum(model.probability(prob.scores))))

@@ -257,10 +257,8 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     """
     C = len(coverages)
     k = check_k(k, C)
-    lam = np.array(base_info, dtype=float, copy=True)
+    lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    for ex in existing or ():
-        lam[ex.pose_idx] += ex.info
     q, eligible = q_from_v(coverage_percentages(coverages, N), v)
     prob = GreedyProblem(lam, coverages, q)
     log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",

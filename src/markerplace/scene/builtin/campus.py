@@ -56,7 +56,7 @@ from markerplace.scene.builtin.meshkit import Material, MeshBuilder, add_box
 from markerplace.scene.builtin.procedural import add_layout, layout_rooms, wall_material
 from markerplace.scene.builtin.spec_loader import SpecError, build_door, build_room, check_keys, read_spec
 from markerplace.scene.types import Scene
-from markerplace.scene.builtin.walls import door_span
+from markerplace.scene.builtin.walls import add_slab_edges, door_span
 
 log = logging.getLogger(__name__)
 
@@ -185,18 +185,8 @@ def _add_stair(mb: MeshBuilder, pal: dict[str, Material], side: Material) -> Non
 def _add_slab(mb: MeshBuilder, pal: dict[str, Material], stair_wall: Material) -> None:
     """Slab edges between the storeys (z from 2.7 to 3.0): a band continuing the exterior wall
     faces, and the faces of the stair opening (the arrival side is the 15th riser)."""
-    x0, y0, x1, y1 = FOOTPRINT
-    z0, z1 = CEILING_HEIGHT, STOREY_HEIGHT
-    band = {"-y": (x0 - HT, y0 - HT, x1 + HT, y0 + HT), "+y": (x0 - HT, y1 - HT, x1 + HT, y1 + HT),
-            "-x": (x0 - HT, y0 - HT, x0 + HT, y1 + HT), "+x": (x1 - HT, y0 - HT, x1 + HT, y1 + HT)}
-    for face, (a0, b0, a1, b1) in band.items():
-        add_box(mb, (a0, b0, z0), (a1, b1, z1), {face: pal["exterior"]}, None, skip=())
-    hx0, hy0, hx1, hy1 = HOLE
-    # each face of the opening is the one inward-looking face of a box just outside that edge
-    add_box(mb, (hx0, hy0 - HT, z1 - RISE), (hx1, hy0, z1), {"+y": pal["trim"]}, None, skip=())
-    add_box(mb, (hx0 - HT, hy0, z0), (hx0, hy1, z1), {"+x": stair_wall}, None, skip=())
-    add_box(mb, (hx0, hy1, z0), (hx1, hy1 + HT, z1), {"-y": stair_wall}, None, skip=())
-    add_box(mb, (hx1, hy0, z0), (hx1 + HT, hy1, z1), {"-x": stair_wall}, None, skip=())
+    add_slab_edges(mb, FOOTPRINT, HOLE, CEILING_HEIGHT, STOREY_HEIGHT, HT, pal["exterior"], stair_wall, pal["trim"],
+                   arrival="-y", rise=RISE)
 
 
 def _add_balustrade(mb: MeshBuilder, pal: dict[str, Material]) -> None:

@@ -270,3 +270,28 @@ def build_openings(mb: MeshBuilder, layout: Layout, pal: dict) -> None:
                     corners, n = np.array([[c, p0, z0], [c, p1, z0], [c, p1, z1], [c, p0, z1]]), (1.0, 0.0, 0.0)
                 uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
                 mb.quad(glass, corners, uv, n)
+
+
+def add_slab_edges(mb: MeshBuilder, footprint: tuple[float, float, float, float], hole: tuple[float, float, float, float],
+                   z0: float, z1: float, half_thickness: float, exterior: Material, stair_wall: Material,
+                   trim: Material, arrival: str, rise: float) -> None:
+    """Slab edges between two storeys of a built-in building, from ``z0`` (the ceiling below) to
+    ``z1`` (the upper floor), metres: a band continuing the exterior wall faces around
+    ``footprint`` (xmin, ymin, xmax, ymax on the walls' centre lines), and the four faces of the
+    stair opening ``hole`` (xmin, ymin, xmax, ymax) continuing the stair room's walls. The
+    ``arrival`` edge of the opening (``"-x"``, ``"-y"``, ``"+x"`` or ``"+y"``) is the stair's last
+    riser: ``rise`` metres high below the upper floor, in ``trim``; it is added first."""
+    x0, y0, x1, y1 = footprint
+    ht = half_thickness
+    band = {"-y": (x0 - ht, y0 - ht, x1 + ht, y0 + ht), "+y": (x0 - ht, y1 - ht, x1 + ht, y1 + ht),
+            "-x": (x0 - ht, y0 - ht, x0 + ht, y1 + ht), "+x": (x1 - ht, y0 - ht, x1 + ht, y1 + ht)}
+    for face, (a0, b0, a1, b1) in band.items():
+        add_box(mb, (a0, b0, z0), (a1, b1, z1), {face: exterior}, None, skip=())
+    hx0, hy0, hx1, hy1 = hole
+    # each face of the opening is the one inward-looking face of a box just outside that edge
+    edges = {"-y": ((hx0, hy0 - ht), (hx1, hy0), "+y"), "-x": ((hx0 - ht, hy0), (hx0, hy1), "+x"),
+             "+y": ((hx0, hy1), (hx1, hy1 + ht), "-y"), "+x": ((hx1, hy0), (hx1 + ht, hy1), "-x")}
+    for edge in [arrival] + [e for e in edges if e != arrival]:
+        (a0, b0), (a1, b1), face = edges[edge]
+        bottom, material = (z1 - rise, trim) if edge == arrival else (z0, stair_wall)
+        add_box(mb, (a0, b0, bottom), (a1, b1, z1), {face: material}, None, skip=())
