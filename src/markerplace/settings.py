@@ -345,7 +345,8 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                  "scene": ("required unless `--plan`", "a built-in scene name or a mesh file; with `--plan` left out "
                                                        "(or the plan's own)"),
                  "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
-                                 "the held-out ceiling's splits and (unless `--test-seed`) the test poses"),
+                                 "the held-out ceiling's splits and (unless `--test-seed`) the test poses; with "
+                                 "`--plan` the plan's"),
                  "--out": None,
                  "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
                                           "method (checked before any work)"),

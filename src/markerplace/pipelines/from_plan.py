@@ -137,11 +137,11 @@ def adopt_plan_stages(folder: PlanFolder, plan_dir: Path, cache_dir: Path) -> li
     ``plan_dir``, :data:`CALIBRATION_CACHE` and ``success_model_*.json`` too) into the
     evaluation's work folder (:func:`markerplace.runtime.cache.adopt`); returns the names
     adopted. Whether a stage reuses one is its key's decision."""
+    calibration = {folder.path / "calibration" / name: Path(cache_dir) / name for name in CALIBRATION_CACHE}
+    adopted = [f"calibration/{src.relative_to(folder.path / 'calibration')}" for src, dst in calibration.items()
+               if cache.adopt(src, dst)]
     names = [*PLAN_STAGES, *(p.name for p in sorted(folder.path.glob("success_model_*.json")))]
-    pairs = [(name, folder.path / name, Path(plan_dir) / name) for name in names]
-    pairs += [(f"calibration/{name}", folder.path / "calibration" / name, Path(cache_dir) / name)
-              for name in CALIBRATION_CACHE]
-    adopted = [name for name, src, dst in pairs if cache.adopt(src, dst)]
+    adopted += [name for name in names if cache.adopt(folder.path / name, Path(plan_dir) / name, calibration)]
     log.info("evaluate --plan: reusing the plan's %s", ", ".join(adopted) or "nothing (no fresh stage)")
     return adopted
 

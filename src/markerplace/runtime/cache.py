@@ -28,6 +28,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
@@ -233,19 +234,25 @@ def recorded_key(artifact: str | Path) -> str | None:
     return key if isinstance(key, str) else None
 
 
-def adopt(source: str | Path, artifact: str | Path) -> bool:
+def adopt(source: str | Path, artifact: str | Path, moved: dict | None = None) -> bool:
     """Make ``artifact`` the fresh artifact ``source`` is (another run folder's, verified by its
     checksum): every file hard-linked (copied across file systems,
     :func:`~markerplace.runtime.atomic_io.link_file`), its meta file last, so an interrupted
-    adoption leaves a stale artifact, never a fresh-looking partial one. Returns False, leaving
-    ``artifact`` alone, when ``source`` is missing or not fresh; True when ``artifact`` is
-    (already, or now) the same artifact. ``source`` is never written."""
+    adoption leaves a stale artifact, never a fresh-looking partial one. ``artifact`` is left
+    alone when ``source`` is missing or not fresh, and when it is itself fresh (for any key:
+    this folder's own work wins). Returns whether ``artifact`` is now the same artifact as
+    ``source``. ``source`` is never written.
+
+    ``moved``: source-side path -> artifact-side path of upstream artifacts adopted alongside
+    (see :mod:`markerplace.runtime.stages`): the meta file then names them where they are now,
+    so the adopted artifact stays fresh while they are unchanged."""
     source, artifact = Path(source), Path(artifact)
     key = recorded_key(source)
     if key is None or not is_fresh(source, key):
         return False
-    if is_fresh(artifact, key) and content_digest(artifact) == content_digest(source):
-        return True
+    own = recorded_key(artifact)
+    if own is not None and is_fresh(artifact, own):  # this folder's own work (or an earlier adoption) stays
+        return own == key and content_digest(artifact) == content_digest(source)
     run_folder.remove(_meta_path(artifact))
     if source.is_dir():
         if artifact.is_dir():
@@ -254,5 +261,14 @@ def adopt(source: str | Path, artifact: str | Path) -> bool:
             link_file(p, artifact / p.relative_to(source))
     else:
         link_file(source, artifact)
-    link_file(_meta_path(source), _meta_path(artifact))
+    up = recorded_upstream(source)
+    if not up or not moved:
+        link_file(_meta_path(source), _meta_path(artifact))
+        return True
+    where = {os.path.normpath(str(src)): Path(dst) for src, dst in moved.items()}
+    renamed = {}
+    for name, digest in up.items():
+        now = where.get(os.path.normpath(str(source.parent / name)))
+        renamed[os.path.relpath(now, artifact.parent) if now is not None else name] = digest
+    write_json(_meta_path(artifact), {**json.loads(_meta_path(source).read_text()), "upstream": renamed})
     return True
