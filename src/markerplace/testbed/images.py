@@ -92,13 +92,12 @@ class TestbedImaging:
                 yield i, r
 
     def render_iter(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
-                    map_only: bool, desc: str, initial: int = 0) -> Iterator[tuple[int, ImageFeatures]]:
+                    map_only: bool, desc: str) -> Iterator[tuple[int, ImageFeatures]]:
         """``(i, features)`` of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with
-        ``markers``, as the executor finishes them (in any order); ``initial``: images already
-        done before (the progress bar starts there)."""
+        ``markers``, as the executor finishes them (in any order)."""
         indices = [int(i) for i in indices]
         items = [(world_from_cam[i], list(markers), map_only) for i in indices]
-        for j, f in self.run(_render_task, items, desc, initial):
+        for j, f in self.run(_render_task, items, desc):
             yield indices[j], f
 
     def render(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
@@ -156,9 +155,9 @@ class BaseImages:
         else:
             writer = FeatureWriter(feat_dir, N, feat_key + mask_key, self.part_size)
             todo = _resume(writer, N, f"{name} (no markers)")
-            for i, f in imaging.render_iter(self.world_from_cam, todo, [], map_only, f"{name} (no markers)",
-                                            initial=N - len(todo)):
-                writer.add(i, f)
+            items = [(self.world_from_cam[i], [], map_only) for i in todo]
+            for j, f in imaging.run(_render_task, items, f"{name} (no markers)", initial=N - len(todo)):
+                writer.add(todo[j], f)
             feats = writer.finish()
             mask = np.asarray(feats.extras.pop("in_view")).reshape(N, -1)
             run_folder.remove(feat_dir / "extra_in_view.npy")
