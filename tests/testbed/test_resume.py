@@ -8,6 +8,7 @@ computes only what no part holds and gives what an uninterrupted run gives."""
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,9 +17,13 @@ from markerplace.geometry import world_from_cam_pose, world_from_marker_pose
 from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
 from markerplace.imaging.features import FeatureSet
 from markerplace.markers import Marker
-from markerplace.runtime.executor import InProcessExecutor
+from markerplace.pipelines.evaluate import run_evaluation
+from markerplace.plan.config import PlanConfig
+from markerplace.plan.discretize.stage import DiscretizeConfig
+from markerplace.runtime.executor import InProcessExecutor, RuntimeConfig
 from markerplace.scene.spec import SceneSpec
-from markerplace.testbed import images
+from markerplace.testbed import config as tbconfig
+from markerplace.testbed import images, predict, prediction_store
 from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.prediction_store import PartialPrediction
 
@@ -123,3 +128,39 @@ def test_partial_prediction_commits_in_chunks(tmp_path):
     assert PartialPrediction(tmp_path, "key-b").done() == {}  # not trusted: those images are localized again
     p.discard()
     assert not (tmp_path / "key-a.partial.npz").exists()
+
+
+def test_an_interrupted_localization_resumes_with_the_images_it_had_not_finished(tmp_path, monkeypatch, caplog):
+    """Ctrl-C in the middle of one prediction's localizations: the next run localizes only the
+    images no commit held, and every prediction equals an uninterrupted run's."""
+    plan = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2), runtime=RuntimeConfig(workers=1))
+    config = tbconfig.EvaluateConfig(test=tbconfig.TestSetConfig(tests=12, sets=("weighted",)),
+                                     study=tbconfig.StudyConfig(methods=("none", "omp"), runs=1, ks=(2,)))
+    real, calls = predict.localize_task, []
+
+    def localize(engine, item):
+        if stop[0] is not None and len(calls) >= stop[0]:
+            raise KeyboardInterrupt
+        calls.append(1)
+        return real(engine, item)
+
+    monkeypatch.setattr(predict, "localize_task", localize)
+    monkeypatch.setattr(prediction_store, "COMMIT_EVERY", 4)
+    caplog.set_level(logging.INFO, logger="markerplace")
+    stop = [None]
+    run_evaluation(SceneSpec("tiny"), plan, config, tmp_path / "clean", progress=False)
+    total = len(calls)
+    calls.clear()
+    stop[0] = 6  # in the first prediction (no markers, 12 test images): 4 committed
+    with pytest.raises(KeyboardInterrupt):
+        run_evaluation(SceneSpec("tiny"), plan, config, tmp_path / "run", progress=False)
+    assert len(list((tmp_path / "run" / "cache" / "predictions").glob("*.partial.npz"))) == 1
+    calls.clear()
+    stop[0] = None
+    run_evaluation(SceneSpec("tiny"), plan, config, tmp_path / "run", progress=False)
+    assert len(calls) == total - 4
+    assert "localize weighted none k=0 run 0: resuming, 4 of 12 images already localized" in caplog.text
+    assert not list((tmp_path / "run" / "cache" / "predictions").glob("*.partial.npz"))
+    a, b = np.load(tmp_path / "clean" / "query_errors.npz"), np.load(tmp_path / "run" / "query_errors.npz")
+    for key in a.files:
+        assert np.array_equal(a[key], b[key], equal_nan=a[key].dtype.kind == "f"), key

@@ -25,7 +25,10 @@ from markerplace.runtime import cache, run_folder
 
 log = logging.getLogger(__name__)
 
-__all__ = ["prediction_path", "load_prediction", "save_prediction", "PartialPrediction"]
+__all__ = ["prediction_path", "load_prediction", "save_prediction", "PartialPrediction", "COMMIT_EVERY"]
+
+COMMIT_EVERY = 128
+"""Estimates per commit of an unfinished prediction (an interruption loses at most this many)."""
 
 
 def prediction_path(folder: str | Path, key: str) -> Path:
@@ -54,12 +57,12 @@ class PartialPrediction:
     Args:
         folder: the predictions folder.
         key: the prediction's key (:func:`save_prediction`'s).
-        every: estimates per commit (an interruption loses at most this many).
+        every: estimates per commit (default :data:`COMMIT_EVERY`).
     """
 
-    def __init__(self, folder: str | Path, key: str, every: int = 128):
+    def __init__(self, folder: str | Path, key: str, every: int | None = None):
         self.path = Path(folder) / f"{key}.partial.npz"
-        self.key, self.every = str(key), int(every)
+        self.key, self.every = str(key), int(COMMIT_EVERY if every is None else every)
         self._est: dict[int, np.ndarray] = {}
         self._new = 0
 
