@@ -158,10 +158,12 @@ def test_a_resumed_evaluate_map_stage_renders_only_the_missing_images(tmp_path):
     rendered, and the outputs equal an uninterrupted run's."""
     argv = ["evaluate", "tiny", "--tests", "20", "--k", "2", "--runs", "1", "--methods", "none,omp", "--test-sets",
             "weighted", "--workers", "2"]
-    r = interrupt_cli(["--verbose", *argv, "--out", str(tmp_path / "a")], "map (no markers): starting", delay=6.0)
+    folder = tmp_path / "a" / "cache" / "map_base" / "features" / "parts"
+    r = interrupt_cli(["--verbose", *argv, "--out", str(tmp_path / "a")], "map (no markers): starting", delay=0.0,
+                      until=lambda: any(folder.glob("part_*.npz")))
     _assert_stopped(r)
-    parts = list((tmp_path / "a" / "cache" / "map_base" / "features" / "parts").glob("part_*.npz"))
-    assert parts, "no part of the map stage was committed before the signal"
+    parts = list(folder.glob("part_*.npz"))
+    assert parts and not (tmp_path / "a" / "cache" / "map_base" / "features.meta.json").exists()
     logs = {}
     for name in ("a", "b"):
         res = subprocess.run([sys.executable, "-m", "markerplace.cli", *argv, "--out", str(tmp_path / name)],
