@@ -342,11 +342,18 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                                "`none` (one page per tag at its own size)"),
              **_COMMON_RUN_OPTIONS},
     "evaluate": {**_SCENE_RUN_OPTIONS,
+                 "scene": ("required unless `--plan`", "a built-in scene name or a mesh file; with `--plan` left out "
+                                                       "(or the plan's own)"),
                  "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
-                                 "the held-out ceiling's splits and (unless `--test-seed`) the test poses"),
+                                 "the held-out ceiling's splits and (unless `--test-seed`) the test poses; with "
+                                 "`--plan` the plan's"),
                  "--out": None,
                  "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
                                           "method (checked before any work)"),
+                 "--plan": ("none", "start from a finished `plan` folder (PLAN_DIR): its scene, settings and placement "
+                                    "(evaluated as its method's, `--k` up to its k, default its k); its cached stages "
+                                    "(discretization, observations, look-alikes, calibration) are reused, the folder "
+                                    "is only read; an option that differs from the plan's is refused"),
                  **_COMMON_RUN_OPTIONS},
     "study": {**_SCENE_RUN_OPTIONS,
               "--seed": ("0", "seeds the scene generator of built-ins and every evaluation of the study (as "

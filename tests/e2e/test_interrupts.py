@@ -152,6 +152,31 @@ def test_a_resumed_plan_is_the_plan_of_an_uninterrupted_run(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_resumed_evaluate_map_stage_renders_only_the_missing_images(tmp_path):
+    """Ctrl-C during evaluate's marker-free map stage (248 poses on the default lattice), then
+    the same command: the log says how many map images the parts kept, only the rest are
+    rendered, and the outputs equal an uninterrupted run's."""
+    argv = ["evaluate", "tiny", "--tests", "20", "--k", "2", "--runs", "1", "--methods", "none,omp", "--test-sets",
+            "weighted", "--workers", "2"]
+    folder = tmp_path / "a" / "cache" / "map_base" / "features" / "parts"
+    r = interrupt_cli(["--verbose", *argv, "--out", str(tmp_path / "a")], "map (no markers): starting", delay=0.0,
+                      until=lambda: any(folder.glob("part_*.npz")))
+    _assert_stopped(r)
+    parts = list(folder.glob("part_*.npz"))
+    assert parts and not (tmp_path / "a" / "cache" / "map_base" / "features.meta.json").exists()
+    logs = {}
+    for name in ("a", "b"):
+        res = subprocess.run([sys.executable, "-m", "markerplace.cli", *argv, "--out", str(tmp_path / name)],
+                             capture_output=True, text=True, env=ENV, timeout=900)
+        assert res.returncode == 0, res.stderr
+        logs[name] = res.stderr
+    assert f"map (no markers): resuming, {64 * len(parts)} of " in logs["a"], logs["a"][-3000:]
+    assert "resuming" not in logs["b"]
+    for out in ("recall.csv", "tables.md"):
+        assert (tmp_path / "a" / out).read_bytes() == (tmp_path / "b" / out).read_bytes(), out
+
+
+@pytest.mark.slow
 def test_sigkill_of_the_main_process_leaves_no_worker_and_no_traceback(tmp_path):
     """SIGKILL cannot be handled: the workers learn of it from the kernel (parent-death
     signal) and end without writing ``BrokenPipeError`` tracebacks into the log."""

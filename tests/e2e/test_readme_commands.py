@@ -64,7 +64,7 @@ def test_readme_lists_the_subcommands_and_builtin_scenes():
     examples = readme_examples()
     assert {"scene", "render", "plan", "fuse", "export", "check", "evaluate", "study"} <= {a[0] for a in examples}
     for args in examples:
-        if args[0] in SCENE_COMMANDS and not args[1].lower().endswith(FILE_SUFFIXES):
+        if args[0] in SCENE_COMMANDS and not args[1].startswith("-") and not args[1].lower().endswith(FILE_SUFFIXES):
             assert args[1] in builtin_names(), args
 
 

@@ -93,10 +93,11 @@ def describe(p: psutil.Process) -> tuple:
 
 def interrupt_cli(args: list[str], wait_for: str, delay: float = 0.5, sig: int = _signal.SIGINT,
                   start_timeout: float = 300.0, limit_s: float = LIMIT_S, cwd: str | Path | None = None,
-                  env: dict | None = None) -> Interrupted:
-    """Run the CLI with ``args``, signal its process group once ``wait_for`` is logged; see the
-    module docstring. The child gets SIGINT's default disposition (a shell's background job
-    would inherit it ignored)."""
+                  env: dict | None = None, until=None) -> Interrupted:
+    """Run the CLI with ``args``, signal its process group once ``wait_for`` is logged (and,
+    with ``until``, a callable, once it also returns True: e.g. a file the stage writes
+    exists); see the module docstring. The child gets SIGINT's default disposition (a shell's
+    background job would inherit it ignored)."""
     cmd = [sys.executable, "-m", "markerplace.cli", *args]
     env = {**os.environ, **(env or {})}
     src = str(SRC)
@@ -120,6 +121,11 @@ def interrupt_cli(args: list[str], wait_for: str, delay: float = 0.5, sig: int =
         deadline = time.monotonic() + start_timeout
         while not seen.is_set() and proc.poll() is None and time.monotonic() < deadline:
             seen.wait(0.05)
+        while until is not None and seen.is_set() and not until() and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if until is not None and not until():
+            seen.clear()
         if not seen.is_set():
             return Interrupted(proc.poll(), float("inf"), float("inf"), 0, [], "".join(lines), reached=False)
         time.sleep(delay)

@@ -41,13 +41,17 @@ def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_pat
     from markerplace.cli.bounds import EVAL_K
     from markerplace.validation import parse_int_list
 
+    from markerplace.cli.evaluate import evaluate_config_from_args
+
     for command in ("study", "evaluate"):
         args = build_parser().parse_args([command, "tiny", "--out", str(tmp_path / command)])
-        ks = parse_int_list(args.k, "--k", EVAL_K)
+        # (evaluate's --k has no argparse default, so that --plan knows whether it was given; the
+        # field's default applies)
+        ks = parse_int_list(args.k, "--k", EVAL_K) if command == "study" else evaluate_config_from_args(args).study.ks
         assert ks == (5, 10, 15, 20)
         config = plan_config_for_budgets(args, ks)
         validate(config)
-        assert config.placement.k == 20 and args.k == "5,10,15,20"  # the caller's args are left alone
+        assert config.placement.k == 20 and args.k == ("5,10,15,20" if command == "study" else None)  # args left alone
 
 
 def test_study_with_default_budgets_gets_past_its_settings(tmp_path, capsys):

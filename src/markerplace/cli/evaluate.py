@@ -9,7 +9,10 @@ import argparse
 import logging
 
 from markerplace.cli.options import plan_config_for_budgets
+from markerplace.errors import UserError
 from markerplace.pipelines.evaluate import RunInputs, evaluate
+from markerplace.pipelines.from_plan import start_from_plan
+from markerplace.plan.config import PlanConfig
 from markerplace.scene.spec import SceneSpec
 from markerplace.testbed.config import validate_evaluate_config
 from dataclasses import replace
@@ -24,19 +27,30 @@ log = logging.getLogger("markerplace.cli.main")
 def evaluate_config_from_args(args: argparse.Namespace):
     """Build an :class:`~markerplace.testbed.config.EvaluateConfig` from parsed ``evaluate``
     arguments: an option per config field (:mod:`markerplace.settings`), ``seed`` from the
-    scene's ``--seed``."""
+    scene's ``--seed`` (0 when left out)."""
     config = EvaluateConfig()
-    return replace(apply(config, values_from_args(args, config, "evaluate")), seed=args.seed)
+    return replace(apply(config, values_from_args(args, config, "evaluate")), seed=args.seed or 0)
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Handler of ``markerplace evaluate``: :func:`markerplace.pipelines.evaluate.evaluate`, then
-    the recall table at (5 cm, 5 deg) and what it wrote."""
+    the recall table at (5 cm, 5 deg) and what it wrote. With ``--plan``, the scene, the plan's
+    settings and its placement come from the plan folder (:mod:`markerplace.pipelines.from_plan`)."""
     config = evaluate_config_from_args(args)
     validate_evaluate_config(config)  # its budgets are valid before the plan settings use them
     inputs = RunInputs(force=args.force, adopt=args.adopt, progress=not getattr(args, "quiet", False))
-    scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
-    result = evaluate(scene, plan_config_for_budgets(args, config.study.ks), config, args.out, args.placements, inputs)
+    if args.plan is not None:
+        start = start_from_plan(args.plan, values_from_args(args, PlanConfig(), "evaluate"), config,
+                                ks_given=args.k is not None, scene=args.scene, up=args.up,
+                                unit_scale=args.unit_scale, seed=args.seed)
+        result = evaluate(start.scene_spec, start.plan_config, start.config, args.out, args.placements, inputs,
+                          plan=start.folder)
+    elif args.scene is None:
+        raise UserError("evaluate needs a scene (a built-in name or a mesh file) or --plan PLAN_DIR")
+    else:
+        scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed or 0)
+        result = evaluate(scene, plan_config_for_budgets(args, config.study.ks), config, args.out, args.placements,
+                          inputs)
     print(result.summary)
     extra = "".join(f", {f}" for f, on in (("ceiling.md", args.ceiling), ("calibration.md, calibration.png, map_outcomes.npz",
                                                                           args.calibration)) if on)
@@ -56,8 +70,12 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                     f"placement methods ({methods}); recall at (1 cm, 1 deg), (5 cm, 5 deg), (10 cm, 10 deg), "
                     "(1 m, 30 deg). --seed also seeds the test poses unless --test-seed is given.",
     )
-    add_scene_args(p)
+    add_scene_args(p, optional="--plan's")
+    p.set_defaults(seed=None)  # (--plan refuses a --seed other than its plan's, but only one that was given)
     p.add_argument("--out", required=True, help="run directory (outputs, caches; an interrupted run resumes)")
+    p.add_argument("--plan", default=None, metavar="PLAN_DIR",
+                   help="start from a finished `markerplace plan` folder: its scene, settings and placement (as its "
+                        "method's), its cached stages reused; the folder is only read")
     p.add_argument("--placements", default=None, metavar="DIR",
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
     study = p.add_argument_group("study switches")
@@ -65,5 +83,5 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     add_setting_args(p, EvaluateConfig(), "evaluate", {"localization": study, "diagnostics": diagnostics},
                      defaults=True)
     add_plan_args(p, "evaluate")
-    p.set_defaults(func=cmd_evaluate)
+    p.set_defaults(func=cmd_evaluate, k=None)  # (--k's default is the field's; None tells --plan it was left out)
     return p

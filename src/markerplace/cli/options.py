@@ -29,8 +29,15 @@ __all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "p
            "plan_config_from_args", "plan_config_for_budgets"]
 
 
-def add_scene_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
+def add_scene_args(p: argparse.ArgumentParser, optional: str | None = None) -> None:
+    """The scene argument and its options; ``optional``: the scene may be left out, and this
+    says what gives it then (``evaluate --plan``)."""
+    if optional:
+        p.add_argument("scene", nargs="?", default=None,
+                       help=f"built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, "
+                            f".ply); left out: {optional}")
+    else:
+        p.add_argument("scene", help="built-in scene name (see `markerplace scene list`) or a mesh file (.glb, .gltf, .obj, .ply)")
     p.add_argument("--up", default=None, help="up axis of the mesh file: z, y, -y, x, -x, -z (default: y for glTF, its specification; z for OBJ/PLY)")
     p.add_argument("--unit-scale", type=float, default=None, help="multiply mesh coordinates by this to get metres (e.g. 0.01 for cm, 0.001 for mm)")
     p.add_argument("--seed", type=int, default=0, help="seed of the procedural generator for built-in scenes (default 0)")

@@ -8,7 +8,6 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.markers import check_markers_on_walls, load_markers
@@ -65,17 +64,10 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     ex = make_executor(RuntimeConfig(workers=workers))
     try:
         data = prepare(spec, config, folder.path, existing=existing, progress=progress, executor=ex)
-        planned = markers_to_internal(folder.markers, offset)
-        cands = [int(r.get("candidate_index", -1)) for r in folder.records]
-        disc_T = data.disc.candidate_world_from_marker
-        for m, c in zip(planned, cands):
-            if not 0 <= c < data.num_candidates or np.abs(disc_T[c] - m.world_from_marker).max() > 1e-4:
-                raise UserError(f"{folder.path}: placement.json does not match the folder's cached stages (tag "
-                                f"{m.tag_id}); re-run `markerplace plan` into it")
+        planned, cands = folder.planned_on_candidates(data.disc.candidate_world_from_marker, offset)
         covs = check.installed_coverages(spec, data.disc.world_from_cam, installed, config, ex)
     finally:
         ex.close()
-    planned = [type(m)(m.tag_id, m.size, disc_T[c].copy(), m.family) for m, c in zip(planned, cands)]
     result = check.compare(data, planned, cands, installed, covs,
                            radius=check.MATCH_RADIUS_M if radius is None else radius)
     text = write_check_outputs(out, result, offset, folder, installed_user)

@@ -2,6 +2,8 @@
 in one run folder, read top to bottom in :func:`run_evaluation`:
 
 1. plan (:func:`markerplace.pipelines.plan.prepare`, then calibration for calibrated methods);
+   ``evaluate --plan`` starts from a finished plan folder instead, reusing its cached stages and
+   its placement (:mod:`markerplace.pipelines.from_plan`);
 2. marker sets: none, OMP (nested k), random and uniform runs, extra placement files
    (:func:`markerplace.testbed.marker_sets.build_placements`);
 3. test poses per test set, identical for every method (:func:`markerplace.testbed.poses.cached_test_poses`);
@@ -13,7 +15,8 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
 7. metrics and reports from the predictions (:mod:`markerplace.testbed.reporting`).
 
 Every stage is cached with the hash of its inputs (:mod:`markerplace.runtime.stages`); an
-interrupted run resumes where it stopped. Per-image work runs on one executor for the whole
+interrupted run resumes where it stopped, inside a stage too: the marker-free images, the
+renders with markers and each prediction's localizations are committed in parts as they arrive. Per-image work runs on one executor for the whole
 run (in process, local processes or a Dask cluster).
 """
 
@@ -29,9 +32,11 @@ import numpy as np
 from markerplace.imaging.engine import marker_key
 from markerplace.errors import UserError
 from markerplace.markers import load_markers
+from markerplace.pipelines.from_plan import adopt_plan_stages, plan_placement
 from markerplace.pipelines.plan import prepare
 from markerplace.pipelines.size_guard import check_first_guess
 from markerplace.plan.config import validate
+from markerplace.plan.folder import PlanFolder
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
 from markerplace.runtime.cluster import check_scheduler
@@ -71,7 +76,8 @@ class EvaluationResult:
 
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
                    imaging_config=None, progress: bool = True, reuse_unchanged: bool = True,
-                   work_dir: str | Path | None = None, extra_placements: dict | None = None) -> EvaluationResult:
+                   work_dir: str | Path | None = None, extra_placements: dict | None = None,
+                   plan: PlanFolder | None = None) -> EvaluationResult:
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
@@ -88,6 +94,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         work_dir: folder of the plan's artifacts (``plan/``) and the caches (``cache/``) (default
             ``out_dir``); runs that share it share every stage with the same inputs (``study``).
         extra_placements: more marker sets evaluated as methods: name -> markers (internal frame).
+        plan: the plan folder of ``evaluate --plan`` (:mod:`markerplace.pipelines.from_plan`):
+            its cached stages are reused and its placement is its method's marker set;
+            ``scene_spec`` and ``plan_config`` must be its own (:func:`~markerplace.pipelines.from_plan.start_from_plan`).
     """
     t_all, timings = time.perf_counter(), {}
     validate_evaluate_config(config)
@@ -97,6 +106,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     work = Path(work_dir) if work_dir is not None else out
     cache_dir, diag, by_spot = work / "cache", config.diagnostics, config.study.tag_ids == "candidate"
     imaging = testbed_imaging_config(plan_config, imaging_config)
+    if plan is not None:
+        adopt_plan_stages(plan, work / "plan", cache_dir)
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
@@ -112,7 +123,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         if placements_dir is not None:  # placement files are in the user's frame; the scene may be recentred
             extra.update({name: markers_to_internal(load_markers(path), world_offset(scene))
                           for name, path in find_placement_files(placements_dir).items()})
-        placements = build_placements(data, plan_config.placement, config, extra)
+        given = plan_placement(plan, data, scene) if plan is not None else None
+        placements = build_placements(data, plan_config.placement, config, extra, given)
         singles = single_placements(candidates, plan_config.placement.tag_size) if diag.ceiling else []
         if by_spot:  # one code per spot in every run, so that runs share renders
             placements, singles = with_candidate_ids(placements, candidates), with_candidate_ids(singles, candidates)
@@ -173,9 +185,10 @@ def open_evaluation_folder(command: str, out: str | Path, scene_spec, plan_confi
 
 
 def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: str | Path | None = None,
-             inputs: RunInputs = RunInputs()) -> EvaluationResult:
+             inputs: RunInputs = RunInputs(), plan: PlanFolder | None = None) -> EvaluationResult:
     """``markerplace evaluate``: every input checked (placement files read) before any work,
-    the run folder opened, then :func:`run_evaluation`."""
+    the run folder opened, then :func:`run_evaluation` (``plan``: ``evaluate --plan``, see
+    :mod:`markerplace.pipelines.from_plan`)."""
     validate_evaluate_config(config)
     validate(plan_config)
     if not config.study.methods and not placements_dir:
@@ -183,5 +196,8 @@ def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: s
     placement_files = find_placement_files(placements_dir) if placements_dir else {}
     for path in placement_files.values():
         load_markers(path, "--placements")
+    if plan is not None and Path(out).resolve() == plan.path.resolve():
+        raise UserError(f"--out {out} is the --plan folder: give the evaluation its own folder (the plan's is only read)")
     run_config = open_evaluation_folder("evaluate", out, scene_spec, plan_config, config, inputs, len(placement_files))
-    return run_evaluation(scene_spec, run_config, config, out, placements_dir=placements_dir, progress=inputs.progress)
+    return run_evaluation(scene_spec, run_config, config, out, placements_dir=placements_dir, progress=inputs.progress,
+                          plan=plan)

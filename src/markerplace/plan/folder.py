@@ -13,13 +13,15 @@ import logging
 from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 from markerplace.errors import UserError
 from markerplace.markers import Marker, marker_from_json
 from markerplace.scene.spec import SceneSpec
 from markerplace.config_file import upgrade_legacy
 from markerplace.jsonfile import read_json
 from markerplace.plan.config import PlanConfig
-from markerplace.scene.worldframe import points_to_internal
+from markerplace.scene.worldframe import markers_to_internal, points_to_internal
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +87,30 @@ class PlanFolder:
             return self.config
         moved = tuple(float(v) for v in points_to_internal(start, offset))
         return replace(self.config, discretize=replace(self.config.discretize, start=moved))
+
+
+    def planned_on_candidates(self, candidate_world_from_marker: np.ndarray, offset) -> tuple[list, list[int]]:
+        """The placed markers in the scene's internal frame on the poses of their candidates (the
+        discretization's exact poses, not placement.json's rounded ones), and each one's
+        candidate index.
+
+        Args:
+            candidate_world_from_marker: (C, 4, 4) the candidates of the folder's cached
+                discretization (internal frame).
+            offset: the scene's :func:`~markerplace.scene.worldframe.world_offset`.
+
+        Raises:
+            UserError: a marker is not on the candidate placement.json names (the folder's
+                stages were computed for other settings).
+        """
+        cands = np.asarray(candidate_world_from_marker, float)
+        internal = markers_to_internal(self.markers, offset)
+        indices = [int(r.get("candidate_index", -1)) for r in self.records]
+        for m, c in zip(internal, indices):
+            if not 0 <= c < len(cands) or np.abs(cands[c] - m.world_from_marker).max() > 1e-4:
+                raise UserError(f"{self.path}: placement.json does not match the folder's cached stages (tag "
+                                f"{m.tag_id}); re-run `markerplace plan` into it")
+        return [Marker(m.tag_id, m.size, cands[c].copy(), m.family) for m, c in zip(internal, indices)], indices
 
 
 def _read_json(path: Path, what: str) -> dict:

@@ -18,6 +18,7 @@ import errno
 import json
 import math
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -132,6 +133,18 @@ def write_npy(path: str | os.PathLike, array: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             np.save(fh, array, allow_pickle=False)
+
+
+def link_file(source: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Make ``path`` a hard link to ``source`` (a copy where the file system has no links or
+    ``source`` is on another one), put in place atomically; ``source`` is only read: every
+    later write of ``path`` replaces the link, never the file behind it."""
+    with atomic_path(path) as tmp:
+        tmp.unlink()
+        try:
+            os.link(source, tmp)
+        except OSError:
+            shutil.copyfile(source, tmp)
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray) -> None:

@@ -11,6 +11,11 @@ Keys are built from content: a stage's key holds the :func:`content_digest` of t
 was computed from (the checksum their meta files record), so an upstream artifact recomputed or
 repaired with other bytes invalidates everything downstream of it.
 
+:func:`adopt` brings a fresh artifact of another run folder (a finished ``plan`` that an
+``evaluate --plan`` starts from) into this one as hard links, so the stage that would make it
+finds it fresh (when its key matches) instead of computing it again; the other folder is only
+read.
+
 A stage interrupted half-way leaves no meta file, so it is simply recomputed next time. A
 damaged artifact (truncated by a full disk, a crash while copying the folder, edited by hand)
 or one that fails to load is recomputed with a warning naming the file; a meta file without a
@@ -23,12 +28,14 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import write_json
+from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import link_file, write_json
 
 log = logging.getLogger(__name__)
 
@@ -216,3 +223,52 @@ def mark_done(artifact: str | Path, key: str, **info: Any) -> None:
     with its size and SHA-256 (see :func:`artifact_checksum`)."""
     artifact = Path(artifact)
     write_json(_meta_path(artifact), {"key": key, **artifact_checksum(artifact), **info})
+
+
+def recorded_key(artifact: str | Path) -> str | None:
+    """The key ``artifact``'s meta file records (None: none, or unreadable)."""
+    try:
+        key = json.loads(_meta_path(Path(artifact)).read_text()).get("key")
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError, RecursionError):
+        return None
+    return key if isinstance(key, str) else None
+
+
+def adopt(source: str | Path, artifact: str | Path, moved: dict | None = None) -> bool:
+    """Make ``artifact`` the fresh artifact ``source`` is (another run folder's, verified by its
+    checksum): every file hard-linked (copied across file systems,
+    :func:`~markerplace.runtime.atomic_io.link_file`), its meta file last, so an interrupted
+    adoption leaves a stale artifact, never a fresh-looking partial one. ``artifact`` is left
+    alone when ``source`` is missing or not fresh, and when it is itself fresh (for any key:
+    this folder's own work wins). Returns whether ``artifact`` is now the same artifact as
+    ``source``. ``source`` is never written.
+
+    ``moved``: source-side path -> artifact-side path of upstream artifacts adopted alongside
+    (see :mod:`markerplace.runtime.stages`): the meta file then names them where they are now,
+    so the adopted artifact stays fresh while they are unchanged."""
+    source, artifact = Path(source), Path(artifact)
+    key = recorded_key(source)
+    if key is None or not is_fresh(source, key):
+        return False
+    own = recorded_key(artifact)
+    if own is not None and is_fresh(artifact, own):  # this folder's own work (or an earlier adoption) stays
+        return own == key and content_digest(artifact) == content_digest(source)
+    run_folder.remove(_meta_path(artifact))
+    if source.is_dir():
+        if artifact.is_dir():
+            run_folder.remove_tree(artifact)
+        for p in sorted(q for q in source.rglob("*") if q.is_file()):
+            link_file(p, artifact / p.relative_to(source))
+    else:
+        link_file(source, artifact)
+    up = recorded_upstream(source)
+    if not up or not moved:
+        link_file(_meta_path(source), _meta_path(artifact))
+        return True
+    where = {os.path.normpath(str(src)): Path(dst) for src, dst in moved.items()}
+    renamed = {}
+    for name, digest in up.items():
+        now = where.get(os.path.normpath(str(source.parent / name)))
+        renamed[os.path.relpath(now, artifact.parent) if now is not None else name] = digest
+    write_json(_meta_path(artifact), {**json.loads(_meta_path(source).read_text()), "upstream": renamed})
+    return True

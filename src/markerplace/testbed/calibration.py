@@ -234,8 +234,10 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         model = cached(f"calibration {name}", run_dir / f"success_model_{name}.json", key, fit,
                        lambda m, p: write_json(p, m.to_json(), digits=None),  # exact: reruns reuse it
                        lambda p: SuccessModel.from_json(json.loads(Path(p).read_text())), data.timings,
-                       upstream=[folder / "map_base" / "features", folder / "map_base" / "in_view.npy",
-                                 folder / "vlad_codebook.npz", folder / "offgrid_base" / "features"])
+                       # (not the in-view masks: each is a function of the key's inputs and of the markers
+                       # of whoever wrote it last, and evaluate rewrites the map's with its own placements)
+                       upstream=[folder / "map_base" / "features", folder / "vlad_codebook.npz",
+                                 folder / "offgrid_base" / "features"])
         data.calibration[name] = {"model": model, "coverages": covs}
 
 

@@ -83,9 +83,10 @@ class TestbedImaging:
         self.executor = executor
         self.progress = progress
 
-    def run(self, task, items: list, desc: str):
-        """``(index, task(engine, items[index]))`` for every item, with a progress bar."""
-        with progress_bar(len(items), desc, "img", self.progress) as bar:
+    def run(self, task, items: list, desc: str, initial: int = 0):
+        """``(index, task(engine, items[index]))`` for every item, with a progress bar that
+        starts at ``initial`` (images an interrupted run already finished)."""
+        with progress_bar(len(items) + initial, desc, "img", self.progress, initial=initial) as bar:
             for i, r in self.executor.map(task, items, self.job):
                 bar.update()
                 yield i, r
@@ -120,16 +121,28 @@ class TestbedImaging:
         return tuple(sorted((tag_id,) + _geometry_key(self.union[u]) for u, tag_id in key))
 
 
+PART_SIZE = 64
+"""Images per part file of a marker-free stage: an interrupted stage loses at most this many."""
+
+
 class BaseImages:
     """Marker-free features (``features/``) and the (N, U) union-marker in-view mask
     (``in_view.npy``) of one image set, cached in ``folder``: features are keyed without
     markers, the mask with the union (a new placement only costs depth renders). ``key`` is
-    the features' cache key: it names the set's images (scene, poses, imaging settings)."""
+    the features' cache key: it names the set's images (scene, poses, imaging settings).
+
+    Both stages commit their work as it arrives: every ``part_size`` images go to a part file
+    (:class:`~markerplace.imaging.features.FeatureWriter`: ``features/parts/`` and
+    ``in_view_parts/parts/``), so an interrupted stage loses at most one part and the next run
+    renders only the images no part holds. The assembled result does not depend on where a run
+    stopped (images are put back in index order).
+    """
 
     def __init__(self, imaging: TestbedImaging, world_from_cam: np.ndarray, folder: Path, key: str, map_only: bool,
-                 name: str):
+                 name: str, part_size: int = PART_SIZE):
         self.folder = Path(folder)
         self.world_from_cam = np.asarray(world_from_cam, float)
+        self.part_size = int(part_size)
         N = len(world_from_cam)
         feat_key = cache.hash_of("base-features-v2", key, map_only, imaging.config)
         mask_key = cache.hash_of(feat_key, imaging.samples, imaging.config.visibility_margin_px,
@@ -140,11 +153,11 @@ class BaseImages:
         if feats is not None:
             log.info("%s: reusing marker-free features in %s", name, feat_dir)
         else:
-            writer = FeatureWriter(feat_dir, N, feat_key + mask_key)
-            done = writer.done()
-            todo = [i for i in range(N) if i not in done]
-            for i, f in imaging.render(world_from_cam, todo, [], map_only, f"{name} (no markers)").items():
-                writer.add(i, f)
+            writer = FeatureWriter(feat_dir, N, feat_key + mask_key, self.part_size)
+            todo = _resume(writer, N, f"{name} (no markers)")
+            items = [(self.world_from_cam[i], [], map_only) for i in todo]
+            for j, f in imaging.run(_render_task, items, f"{name} (no markers)", initial=N - len(todo)):
+                writer.add(todo[j], f)
             feats = writer.finish()
             mask = np.asarray(feats.extras.pop("in_view")).reshape(N, -1)
             run_folder.remove(feat_dir / "extra_in_view.npy")
@@ -152,8 +165,7 @@ class BaseImages:
         if mask is None:
             mask = cache.load_fresh(mask_path, mask_key, lambda p: np.load(p, allow_pickle=False))
         if mask is None:  # features cached, markers changed: depth-only renders
-            got = dict(imaging.run(_in_view_task, [world_from_cam[i] for i in range(N)], f"{name} (marker visibility)"))
-            mask = np.stack([got[i] for i in range(N)]).reshape(N, -1) if N else np.zeros((0, len(imaging.union)), bool)
+            mask = self._depth_mask(imaging, mask_key, name)
         if not cache.is_fresh(mask_path, mask_key):
             write_npy(mask_path, mask)
             cache.mark_done(mask_path, mask_key)
@@ -161,3 +173,29 @@ class BaseImages:
         self.in_view = mask.reshape(N, len(imaging.union))
         self.key = feat_key
         self.digest = cache.hash_of(cache.content_digest(feat_dir), cache.content_digest(mask_path))
+
+    def _depth_mask(self, imaging: TestbedImaging, mask_key: str, name: str) -> np.ndarray:
+        """(N, U) in-view mask from depth-only renders, streamed to ``in_view_parts/`` (resumed
+        from there after an interruption, removed once assembled)."""
+        N = len(self.world_from_cam)
+        if N == 0:
+            return np.zeros((0, len(imaging.union)), bool)
+        work = self.folder / "in_view_parts"
+        writer = FeatureWriter(work, N, mask_key, self.part_size)
+        todo = _resume(writer, N, f"{name} (marker visibility)")
+        for j, m in imaging.run(_in_view_task, [self.world_from_cam[i] for i in todo], f"{name} (marker visibility)",
+                                initial=N - len(todo)):
+            writer.add(todo[j], ImageFeatures(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.uint8),
+                                              np.zeros((0, 3), np.float32), extras={"in_view": m}))
+        mask = np.array(writer.finish().extras["in_view"]).reshape(N, -1)
+        run_folder.remove_tree(work)
+        return mask
+
+
+def _resume(writer: FeatureWriter, n: int, desc: str) -> list[int]:
+    """The images of ``writer``'s ``n`` that no part of an earlier run holds, saying so when
+    some do."""
+    done = writer.done()
+    if done:
+        log.info("%s: resuming, %d of %d images already done", desc, len(done), n)
+    return [i for i in range(n) if i not in done]

@@ -132,8 +132,8 @@ def with_candidate_ids(runs: Sequence[PlacementRun], candidate_world_from_marker
             for r, rid in zip(runs, ids)]
 
 
-def build_placements(data, placement_config, config,
-                     extra: dict[str, Sequence] | None = None) -> list[PlacementRun]:
+def build_placements(data, placement_config, config, extra: dict[str, Sequence] | None = None,
+                     given: dict[str, Sequence] | None = None) -> list[PlacementRun]:
     """Every marker set to evaluate, in processing order.
 
     Args:
@@ -144,6 +144,9 @@ def build_placements(data, placement_config, config,
             runs, ks, tag scale, shift; its pose seed for the shift signs).
         extra: method name -> ordered markers (e.g. from ``--placements``); evaluated at each k
             up to their length (prefixes), or at their full length when shorter than every k.
+        given: method name -> its placement made already (``evaluate --plan``), used instead
+            of placing it: its first k markers at each k (the caller keeps k within it, and
+            to its length for a method that is not nested).
 
     Methods come in registry order. A ``nested`` method (OMP) is placed once with max k and
     evaluated on prefixes; a ``randomized`` one (random, uniform) draws its own placement for
@@ -162,7 +165,10 @@ def build_placements(data, placement_config, config,
     for method, cls in PLACEMENT_METHODS.items():
         if method not in study.methods:
             continue
-        if cls.randomized:
+        if method in (given or {}):
+            for k in ks:
+                add(method, 0, k, list(given[method])[:k])
+        elif cls.randomized:
             for run in range(study.runs):
                 for k in ks:
                     pl = place(data, replace(placement_config, k=k, method=method, seed=placement_config.seed + run),

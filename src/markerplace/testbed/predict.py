@@ -30,7 +30,7 @@ from markerplace.runtime import cache, run_folder
 from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.maps import localize_task, save_map
 from markerplace.testbed.marker_sets import NO_MARKERS
-from markerplace.testbed.prediction_store import load_prediction, save_prediction
+from markerplace.testbed.prediction_store import PartialPrediction, load_prediction, save_prediction
 from markerplace.testbed.render_store import RenderStore
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.localization.vlad import nearest
@@ -208,7 +208,8 @@ class PlacementMaps:
 def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg, world_from_cam: np.ndarray,
                  in_view: np.ndarray, base_features, base_estimates: np.ndarray | None, retrieval: Retrieval | None,
                  set_name: str, desc: str, exclude: Sequence[Sequence[int]] | None = None,
-                 own_features: bool = False, rendered: RenderedFeatures | None = None) -> tuple[np.ndarray, int]:
+                 own_features: bool = False, rendered: RenderedFeatures | None = None,
+                 partial: PartialPrediction | None = None) -> tuple[np.ndarray, int]:
     """Localize every image of one set against a placement's map.
 
     Args:
@@ -229,6 +230,8 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
             features from the placement's map instead of being rendered again.
         rendered: the set's renders with markers, kept between placements (None: render every
             image with a marker in view in the worker that localizes it).
+        partial: where estimates are committed as they arrive (None: nowhere); the images it
+            already holds (an interrupted run's) are neither rendered nor localized again.
 
     Returns:
         (Q, 4, 4) estimates (all NaN where localization failed) and the number of images
@@ -246,6 +249,13 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
                 and retrieval.unchanged(pmap.vlad, qv[i], pmap.changed, () if exclude is None else exclude[i])]
         est[same] = base_estimates[same]
         todo = sorted(set(todo) - set(same))
+    localized = len(todo)
+    prior = partial.done() if partial is not None else {}
+    if prior:
+        log.info("%s: resuming, %d of %d images already localized", desc, len(prior), localized)
+        for i, e in prior.items():
+            est[i] = e
+        todo = [i for i in todo if i not in prior]
     with_markers = {}
     if rendered is not None and not own_features:
         with_markers = rendered.update(tb, world_from_cam, keys, markers, False, f"render {desc[len('localize '):]}",
@@ -260,10 +270,11 @@ def localize_set(tb: TestbedImaging, pmap: PlacementMap, markers: Sequence, lcfg
     for i in todo:
         item = (str(pmap.folder), lcfg, features(i), world_from_cam[i], list(markers) if keys[i] else [])
         items.append(item if exclude is None else item + (tuple(int(j) for j in exclude[i]),))
-    got = dict(tb.run(localize_task, items, desc))
-    for j, i in enumerate(todo):
-        est[i] = got[j]
-    return est, len(todo)
+    for j, e in tb.run(localize_task, items, desc, len(prior)):
+        est[todo[j]] = e
+        if partial is not None:
+            partial.add(todo[j], e)
+    return est, localized
 
 
 
@@ -357,13 +368,15 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
             timings["map_with_markers"] += time.perf_counter() - t0
             t0 = time.perf_counter()
             for s, key in pending:
+                partial = PartialPrediction(pred_dir, key)
                 est, localized = localize_set(tb, pmap, p.markers, lcfg, s.world_from_cam, s.base.in_view,
                                               s.base.features, predictions.get(PredictionKey(NO_MARKERS, 0, 0, s.name)), retrieval,
                                               s.name, f"localize {s.name} {p.method} k={p.k} run {p.run}",
-                                              s.exclude, s.own, rendered[s.name])
+                                              s.exclude, s.own, rendered[s.name], partial)
                 reused += len(est) - localized
                 save_prediction(pred_dir, key, est, method=p.method, run=p.run, k=p.k, test_set=s.name,
                                 localized=localized)
+                partial.discard()
                 predictions[PredictionKey(p.method, p.run, p.k, s.name)] = est
             timings["localize"] += time.perf_counter() - t0
     if reused:
