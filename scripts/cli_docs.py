@@ -13,6 +13,8 @@ import logging
 import sys
 from pathlib import Path
 
+from markerplace.cli.option_docs import rewrite
+
 log = logging.getLogger("cli_docs")
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
@@ -23,8 +25,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="only check that docs/cli.md is up to date")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    from markerplace.cli.option_docs import rewrite
-
     text = DOCS.read_text(encoding="utf-8")
     new = rewrite(text)
     if new == text:
