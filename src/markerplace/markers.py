@@ -166,7 +166,7 @@ def marker_from_json(d: dict, default_size: float = DEFAULT_TAG_SIZE) -> Marker:
         T = world_from_marker_pose(position, normal)
     else:
         raise UserError("marker entry needs 'world_from_marker' or both 'position' and 'normal'")
-    # at the precision JSON files are written with (io_utils.write_json): a marker written back
+    # at the precision JSON files are written with (runtime.atomic_io.write_json): a marker written back
     # (config.json's existing markers) and read again is bit for bit the one used
     return Marker(tag_id, float(size), clean_array(T), family)
 
