@@ -27,7 +27,9 @@ Prints ``name: value`` lines.
   occlusion test, the transfer of a result from a worker (pickled through a pipe, as the
   process pool returns it; plus its size) and bookkeeping (the ImageFeatures and the
   FeatureWriter that streams parts to disk). Median and mean ms each, and their share of the
-  per-pose total.
+  per-pose total; also a depth-only render of the same pose (not part of observe: what the RGB
+  pass costs) and the scene's triangle count. ``DIR.log`` keeps the plan log (seconds since
+  start per line).
 
     .venv/bin/python benchmarks/plan_profile.py [--scene house-scan|campus] [--work out/bench_plan_profile]
         [--sample 60] [--workers 2] [-k 10]
@@ -145,8 +147,11 @@ def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, bufsize=1)
     sampler = TreeSampler(proc.pid, args.period).start()
     lines: list[tuple[float, str]] = []
-    for line in proc.stderr:
-        lines.append((time.perf_counter(), line.rstrip("\n")))
+    with open(out.with_suffix(".log"), "w") as log:
+        for line in proc.stderr:
+            lines.append((time.perf_counter(), line.rstrip("\n")))
+            log.write(f"{lines[-1][0] - t0:9.2f} {line}")
+    emit("plan_log", out.with_suffix(".log"))
     proc.wait()
     t_end = time.perf_counter()
     sampler.stop()
@@ -180,18 +185,22 @@ def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str
     return lines
 
 
-def area(lines: list[tuple[float, str]]) -> None:
-    text = "\n".join(s for _, s in lines)
-    open_floor = sum(float(x) for x in re.findall(r"open floor ([\d.]+) m\^2", text))
-    free = sum(float(x) for x in re.findall(r"free region ([\d.]+) m\^2", text))
-    poses = re.search(r"= (\d+) poses, (\d+) candidate", text)
-    emit("storeys_planned", len(re.findall(r"discretize: storey \d+", text)))
-    emit("area.open_floor_m2", open_floor)
-    emit("area.free_region_m2", free)
-    emit("area_reaches_200m2", open_floor >= AREA_GOAL)
+def area(lines: list[tuple[float, str]], out: Path) -> None:
+    """Floor area of the planned storeys (the discretization's summary), poses and candidates."""
+    from markerplace.plan.discretize.artifact import load as load_discretization
+
+    summary = load_discretization(out / "discretization.npz").summary
+    storeys = summary.get("per_storey", [])
+    open_floor = sum(s["open_floor_m2"] for s in storeys)
+    emit("storeys_planned", len(storeys))
+    emit("area.open_floor_m2", float(open_floor))
+    emit("area.free_region_m2", float(sum(s["free_m2"] for s in storeys)))
+    emit("area.covered_m2", float(sum(s["covered_m2"] for s in storeys)))
+    emit("area_reaches_200m2", bool(open_floor >= AREA_GOAL))
+    poses = first(lines, r"= (\d+) poses, (\d+) candidate")
     if poses:
-        emit("poses", int(poses.group(1)))
-        emit("candidates", int(poses.group(2)))
+        emit("poses", int(poses[1].group(1)))
+        emit("candidates", int(poses[1].group(2)))
 
 
 def _send(conn, obj) -> None:
@@ -218,11 +227,12 @@ def per_pose(args, spec, up, out: Path) -> None:
     in_view = geometric_visibility(poses[pick], cands, config.imaging.camera, config.noise.max_range)
     samples = marker_points(cands, config.placement.tag_size)
     engine = ImagingEngine(EngineSpec(scene_spec, config.imaging, {"candidates": samples}))
+    emit("per_pose.scene_triangles", int(engine.renderer.scene.num_faces))
     K, cfg = engine.K, config.imaging
     engine.render(poses[pick[0]])  # warm-up: GL context, scene upload
     steps = ("render", "sift", "lift", "occlusion", "transfer", "bookkeeping")
     t = {s: [] for s in steps}
-    nbytes, nfeat = [], []
+    nbytes, nfeat, depth_only = [], [], []
     recv, send = Pipe(duplex=False)
     with tempfile.TemporaryDirectory() as tmp:
         writer = FeatureWriter(Path(tmp) / "obs", len(pick), "bench")
@@ -251,6 +261,8 @@ def per_pose(args, spec, up, out: Path) -> None:
             c7 = time.perf_counter()
             writer.add(got[0][0], got[0][1])
             c8 = time.perf_counter()
+            engine.render(poses[i], rgb=False)  # not part of observe: how much of the render is the RGB pass
+            depth_only.append(1000 * (time.perf_counter() - c8))
             nfeat.append(len(feats.keypoints))
             for s, dt in zip(steps, (c1 - c0, c2 - c1, c3 - c2, c4 - c3, c7 - c6, (c5 - c4) + (c8 - c7))):
                 t[s].append(1000 * dt)
@@ -269,6 +281,8 @@ def per_pose(args, spec, up, out: Path) -> None:
         emit(f"per_pose.{s}.mean_ms", float(np.mean(v)))
         if s != "total":
             emit(f"per_pose.{s}.share_of_mean", float(np.mean(v) / np.mean(total)))
+    emit("per_pose.render_depth_only.median_ms", float(np.median(depth_only)))
+    emit("per_pose.render_depth_only.mean_ms", float(np.mean(depth_only)))
     emit("per_pose.observe_one_core_s_all_poses", float(np.mean(total)) / 1000 * len(poses))
 
 
@@ -289,7 +303,7 @@ def main() -> int:
     emit("cpus", os.cpu_count())
     out = work / f"plan_{args.scene}"
     lines = plan_stages(args, plan_scene, out)
-    area(lines)
+    area(lines, out)
     per_pose(args, spec, up, out)
     return 0
 
