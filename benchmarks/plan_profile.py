@@ -54,7 +54,8 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from scan_plan import emit  # benchmarks/ is on sys.path when run as a script
+from run_estimate import house_scan, markerplace_exe  # benchmarks/ is on sys.path when run as a script
+from scan_plan import emit
 
 AREA_GOAL = 200.0
 STAGES = ("setup", "discretize", "size_check", "observe", "similarity", "score", "place", "deliverables")
@@ -62,11 +63,8 @@ STAGES = ("setup", "discretize", "size_check", "observe", "similarity", "score",
 
 def scene_args(args, work: Path) -> tuple[list[str], str, str | None]:
     """(``plan`` scene arguments, the scene spec, its up axis); exports the scan when missing."""
-    exe = str(Path(sys.executable).with_name("markerplace"))
     if args.scene == "house-scan":
-        scan = work / "house_scan.ply"
-        if not scan.exists():
-            subprocess.run([exe, "--quiet", "scene", "export", "house", str(scan), "--as-scan"], check=True)
+        scan = house_scan(work)
         return [str(scan), "--up", "z"], str(scan), "z"
     if args.scene == "campus":
         return ["campus", "--level", "0"], "campus", None
@@ -137,7 +135,7 @@ def first(lines: list[tuple[float, str]], pattern: str, after: float = 0.0) -> t
 
 def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str]]:
     """Run ``plan`` into ``out`` and print per stage wall s, CPU s and peak RSS; returns the log lines."""
-    exe = str(Path(sys.executable).with_name("markerplace"))
+    exe = markerplace_exe()
     shutil.rmtree(out, ignore_errors=True)
     cmd = [exe, "plan", *plan_scene, *args.plan_args.split(), "-k", str(args.k), "--out", str(out),
            "--workers", str(args.workers)]
