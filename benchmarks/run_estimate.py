@@ -39,6 +39,19 @@ def seconds(text: str) -> float:
     return total
 
 
+def markerplace_exe() -> str:
+    """The ``markerplace`` command of this interpreter's environment."""
+    return str(Path(sys.executable).with_name("markerplace"))
+
+
+def house_scan(work: Path) -> Path:
+    """``scene export house --as-scan`` cached as ``work/house_scan.ply`` (exported when missing)."""
+    scan = work / "house_scan.ply"
+    if not scan.exists():
+        subprocess.run([markerplace_exe(), "--quiet", "scene", "export", "house", str(scan), "--as-scan"], check=True)
+    return scan
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default="room,house,house-scan")
@@ -47,15 +60,12 @@ def main() -> int:
     args = ap.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    exe = str(Path(sys.executable).with_name("markerplace"))
+    exe = markerplace_exe()
     worst = 1.0
     for name in args.scenes.split(","):
         scene_args = [name]
         if name == "house-scan":
-            scan = work / "house_scan.ply"
-            if not scan.exists():
-                subprocess.run([exe, "--quiet", "scene", "export", "house", str(scan), "--as-scan"], check=True)
-            scene_args = [str(scan), "--up", "z"]
+            scene_args = [str(house_scan(work)), "--up", "z"]
         out = work / f"plan_{name}"
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.perf_counter()
