@@ -119,9 +119,15 @@ def percentile_with_zeros(values: np.ndarray, n_total: int, q: float,
     return float(np.partition(values, j)[j])
 
 
-def coverage_percentages(coverages: Sequence[MarkerCoverage], num_poses: int) -> np.ndarray:
-    """(C,) ``P_m = 100 |C_m| / N``: percentage of feasible poses that see each candidate."""
-    return np.array([100.0 * len(c) / num_poses for c in coverages], dtype=float)
+def coverage_percentages(coverages: Sequence[MarkerCoverage], num_poses: int,
+                         weights: np.ndarray | None = None) -> np.ndarray:
+    """(C,) ``P_m = 100 |C_m| / N``: percentage of feasible poses that see each candidate; with
+    (N,) pose ``weights``, the percentage of the total weight."""
+    if weights is None:
+        return np.array([100.0 * len(c) / num_poses for c in coverages], dtype=float)
+    w = np.asarray(weights, dtype=float)
+    total = max(float(w.sum()), 1e-300)
+    return np.array([100.0 * float(w[c.pose_idx].sum()) / total for c in coverages], dtype=float)
 
 
 def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
@@ -156,8 +162,11 @@ def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
 class GreedyProblem:
     """Flattened coverages for batched gain evaluation."""
 
-    def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float):
+    def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float,
+                 weights: np.ndarray | None = None):
         self.N = base_info.shape[0]
+        self.weights = None if weights is None else np.asarray(weights, dtype=float).reshape(self.N)
+        self.q = float(q)
         self.sizes = np.array([len(c) for c in coverages], dtype=np.int64)
         self.offsets = np.zeros(len(coverages) + 1, dtype=np.int64)
         np.cumsum(self.sizes, out=self.offsets[1:])
@@ -201,14 +210,22 @@ class GreedyProblem:
             out[nz] = np.bincount(seg, weights=values, minlength=int(np.count_nonzero(nz)))
         return out
 
+    def pose_weight(self, pidx: np.ndarray) -> np.ndarray | float:
+        """Weights of poses ``pidx`` (1.0 when the problem has none)."""
+        return 1.0 if self.weights is None else self.weights[pidx]
+
     def evaluate(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """q-th percentile gains and mean gains (nats) of candidates ``cands``."""
+        """q-th percentile gains and mean gains (nats) of candidates ``cands``; with pose
+        weights, the weighted percentile and the weighted mean (:meth:`_weighted_percentiles`)."""
         cands = np.asarray(cands, dtype=np.int64)
         sizes = self.sizes[cands]
         qg = np.zeros(len(cands))
-        nz, _, g, seg = self.pose_gains(cands)
-        mg = self.segment_sums(nz, seg, g) / max(self.N, 1)
+        nz, pidx, g, seg = self.pose_gains(cands)
+        mg = self.segment_sums(nz, seg, g * self.pose_weight(pidx)) / max(self.N, 1)
         if not np.any(nz):
+            return qg, mg
+        if self.weights is not None:
+            qg[nz] = self._weighted_percentiles(pidx, g, seg, int(np.count_nonzero(nz)))
             return qg, mg
         live = cands[nz]
         # Per-segment k-th smallest: sort by (segment, gain); segments stay in place.
@@ -221,6 +238,27 @@ class GreedyProblem:
         out[pos] = srt[starts[pos] + j[pos] - 1]
         qg[nz] = out
         return qg, mg
+
+    def _weighted_percentiles(self, pidx: np.ndarray, g: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
+        """(n,) weighted q-th percentile per segment of the gains padded with zeros: the
+        smallest gain x with (weight of the poses whose gain is <= x) >= q/100 of the total
+        weight, the unseen poses gaining 0 (``inverted_cdf`` with weights; with every weight 1
+        it is the unweighted rule: the tests check the same picks)."""
+        w = self.weights
+        total = float(w.sum())
+        thresh = self.q / 100.0 * total  # compared exactly, as numpy's inverted_cdf does
+        seen_w = np.bincount(seg, weights=w[pidx], minlength=n)
+        zero_w = total - seen_w  # weight of the poses that gain nothing
+        order = np.lexsort((g, seg))
+        srt, ws, ss = g[order], w[pidx][order], seg[order]
+        cum = np.cumsum(ws)
+        before = np.concatenate([[0.0], np.cumsum(seen_w)[:-1]])  # cumulative weight before each segment
+        reach = zero_w[ss] + cum - before[ss] >= thresh
+        out = np.zeros(n)
+        hit_seg, first = np.unique(ss[reach], return_index=True)
+        out[hit_seg] = srt[np.flatnonzero(reach)[first]]
+        out[zero_w >= thresh] = 0.0
+        return out
 
 
 def check_k(k: int, num_candidates: int) -> int:
@@ -236,7 +274,8 @@ def check_k(k: int, num_candidates: int) -> int:
 def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,
                v: float = 90.0, lazy: bool = True,
                existing: Sequence[MarkerCoverage] | None = None,
-               progress: Callable[[int, int, int, float], None] | None = None) -> PlacementResult:
+               progress: Callable[[int, int, int, float], None] | None = None,
+               weights: np.ndarray | None = None) -> PlacementResult:
     """Optimized marker placement (the paper's Algorithm 1), optionally with lazy evaluation.
 
     Args:
@@ -248,6 +287,9 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
         existing: coverages of markers already in the scene; their information is added to
             ``base_info`` before the greedy starts (they are not candidates).
         progress: optional callback ``progress(i, k, candidate, gain)`` after each pick.
+        weights: (N,) pose weights >= 0 (``plan --where``), or None (every pose 1): ``P_m`` is
+            the share of the total weight that sees m, the gain the weighted q-th percentile and
+            the mean the weighted mean (still monotone in every pose's gain, so lazy stays exact).
 
     Returns:
         :class:`PlacementResult`. Plain and lazy return identical order and gains.
@@ -259,8 +301,8 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     k = check_k(k, C)
     lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    q, eligible = q_from_v(coverage_percentages(coverages, N), v)
-    prob = GreedyProblem(lam, coverages, q)
+    q, eligible = q_from_v(coverage_percentages(coverages, N, weights), v)
+    prob = GreedyProblem(lam, coverages, q, weights)
     log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",
               N, C, k, v, q, int(eligible.sum()), lazy)
 
