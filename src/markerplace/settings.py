@@ -329,7 +329,7 @@ _COMMON_RUN_OPTIONS = {
 }
 
 RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
-    "plan": {**_SCENE_RUN_OPTIONS, "--out": None,
+    "plan": {**_SCENE_RUN_OPTIONS, "--out": None, "--where": None,
              "--config": ("none", "settings from a TOML file or a plan's `config.json` (see "
                                   "[Settings files](#settings-files-plan---config)); options given on the command "
                                   "line override it"),
@@ -338,11 +338,6 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
              "--exclude": ("none", "spots and boxes where no tag may go, in the model's coordinates (format below; "
                                    "`report.html`'s review buttons download one); applied when placing, so a re-run "
                                    "reuses every cached stage and renders nothing"),
-             "--where": ("none", "GeoJSON file of where the cameras will be: zones (`Polygon`, `weight`), routes "
-                                 "(`LineString`, `width`, `heading`) and poses (`Point`, `radius`, `yaw_deg`), in "
-                                 "the model's coordinates (format in [where.md](where.md)); OMP's percentile gain, "
-                                 "`expected-recall`, the predicted recall and the bounds weigh each camera pose by "
-                                 "it; applied after discretize, so a re-run reuses every cached stage"),
              "--paper": ("a4", "paper of `tags.pdf`: `a4`, `letter`, `a3` (a tag larger than the page is tiled) or "
                                "`none` (one page per tag at its own size)"),
              **_COMMON_RUN_OPTIONS},
@@ -352,13 +347,9 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                  "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
                                  "the held-out ceiling's splits and (unless `--test-seed`) the test poses; with "
                                  "`--plan` the plan's"),
-                 "--out": None,
+                 "--out": None, "--where": None,
                  "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
                                           "method (checked before any work)"),
-                 "--where": ("none", "GeoJSON file of where the cameras will be ([where.md](where.md)): the "
-                                     "methods' objectives weigh the camera poses by it (as `plan --where`) and "
-                                     "`--test-sets where` draws test images from it; with `--plan` the plan's own "
-                                     "where file is used"),
                  "--plan": ("none", "start from a finished `plan` folder (PLAN_DIR): its scene, settings and placement "
                                     "(evaluated as its method's, `--k` up to its k, default its k); its cached stages "
                                     "(discretization, observations, look-alikes, calibration) are reused, the folder "

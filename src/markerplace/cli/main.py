@@ -159,9 +159,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
                              "placing, so a re-run reuses every cached stage (see docs/cli.md)")
     p_plan.add_argument("--where", default=None, metavar="FILE",
-                        help="GeoJSON file of where the cameras will be (zones, routes with a width and a heading, "
-                             "poses), in the model's coordinates: camera poses are weighted by it in the objective "
-                             "and the predicted recall (see docs/where.md)")
+                        help="GeoJSON file of where the cameras will be: zones, routes (width, heading) and poses "
+                             "of use in the model's coordinates (docs/where.md); the objective, the predicted recall "
+                             "and the bounds weigh each camera pose by it; applied after discretize, so a re-run "
+                             "reuses every cached stage")
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "

@@ -37,6 +37,7 @@ from markerplace.pipelines.plan import prepare
 from markerplace.pipelines.size_guard import check_first_guess
 from markerplace.plan.config import validate
 from markerplace.plan.folder import PlanFolder
+from markerplace.plan.where import Where
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
 from markerplace.runtime.cluster import check_scheduler
@@ -77,7 +78,7 @@ class EvaluationResult:
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
                    imaging_config=None, progress: bool = True, reuse_unchanged: bool = True,
                    work_dir: str | Path | None = None, extra_placements: dict | None = None,
-                   plan: PlanFolder | None = None) -> EvaluationResult:
+                   plan: PlanFolder | None = None, where: Where | None = None) -> EvaluationResult:
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
@@ -97,9 +98,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         plan: the plan folder of ``evaluate --plan`` (:mod:`markerplace.pipelines.from_plan`):
             its cached stages are reused and its placement is its method's marker set;
             ``scene_spec`` and ``plan_config`` must be its own (:func:`~markerplace.pipelines.from_plan.start_from_plan`).
+        where: the ``--where`` file (:mod:`markerplace.plan.where`): the placement methods weigh
+            the poses by it (as ``plan --where``) and the ``where`` test set is drawn from it.
     """
     t_all, timings = time.perf_counter(), {}
-    validate_evaluate_config(config)
+    validate_evaluate_config(config, where is not None)
     validate(plan_config)
     out = Path(out_dir)
     run_folder.make_dirs(out)
@@ -111,7 +114,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
-                       k=max(config.study.ks))
+                       k=max(config.study.ks), where=where)
         calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0
@@ -185,11 +188,12 @@ def open_evaluation_folder(command: str, out: str | Path, scene_spec, plan_confi
 
 
 def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: str | Path | None = None,
-             inputs: RunInputs = RunInputs(), plan: PlanFolder | None = None) -> EvaluationResult:
+             inputs: RunInputs = RunInputs(), plan: PlanFolder | None = None,
+             where: Where | None = None) -> EvaluationResult:
     """``markerplace evaluate``: every input checked (placement files read) before any work,
     the run folder opened, then :func:`run_evaluation` (``plan``: ``evaluate --plan``, see
-    :mod:`markerplace.pipelines.from_plan`)."""
-    validate_evaluate_config(config)
+    :mod:`markerplace.pipelines.from_plan`; ``where``: ``--where`` or the plan's)."""
+    validate_evaluate_config(config, where is not None)
     validate(plan_config)
     if not config.study.methods and not placements_dir:
         raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
@@ -200,4 +204,4 @@ def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: s
         raise UserError(f"--out {out} is the --plan folder: give the evaluation its own folder (the plan's is only read)")
     run_config = open_evaluation_folder("evaluate", out, scene_spec, plan_config, config, inputs, len(placement_files))
     return run_evaluation(scene_spec, run_config, config, out, placements_dir=placements_dir, progress=inputs.progress,
-                          plan=plan)
+                          plan=plan, where=where)

@@ -297,15 +297,27 @@ def raw_pose_weights(where: Where, xyz: np.ndarray, yaw: np.ndarray, storey: np.
         yaw: (N,) radians, counter-clockwise from +x.
         storey: (N,) storey index of each pose.
     """
+    weights, empty = _weigh(where, xyz, yaw, storey)
+    _warn(empty)
+    return weights
+
+
+def _weigh(where: Where, xyz: np.ndarray, yaw: np.ndarray, storey: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """:func:`raw_pose_weights` without the warnings, and the labels of the features that hold no pose."""
     xyz = np.asarray(xyz, float).reshape(-1, 3)
     yaw, storey = np.asarray(yaw, float).reshape(-1), np.asarray(storey).reshape(-1)
-    best = np.full(len(xyz), -1.0)
+    best, empty = np.full(len(xyz), -1.0), []
     for f in where.features:
         mask = _holds(f, xyz, yaw, storey)
         if not mask.any():
-            log.warning("%s holds no camera pose (is it in the model's frame, metres, on a planned storey?)", f.label)
+            empty.append(f.label)
         best[mask] = np.maximum(best[mask], f.weight)
-    return np.where(best < 0.0, where.default_weight, best)
+    return np.where(best < 0.0, where.default_weight, best), empty
+
+
+def _warn(empty: list[str]) -> None:
+    for label in empty:
+        log.warning("%s holds no camera pose (is it in the model's frame, metres, on a planned storey?)", label)
 
 
 def pose_weights(where: Where, xyz: np.ndarray, yaw: np.ndarray, storey: np.ndarray) -> np.ndarray:
@@ -316,7 +328,7 @@ def pose_weights(where: Where, xyz: np.ndarray, yaw: np.ndarray, storey: np.ndar
         UserError: no pose lies in any feature, or every pose's weight is 0 (says where the
             poses are, to compare with the file's coordinates).
     """
-    w = raw_pose_weights(where, xyz, yaw, storey)
+    w, empty = _weigh(where, xyz, yaw, storey)
     if not len(w) or w.sum() <= 0.0:
         xy = np.asarray(xyz, float).reshape(-1, 3)[:, :2]
         span = (f"; the camera poses span x {xy[:, 0].min():.2f}..{xy[:, 0].max():.2f}, "
@@ -324,6 +336,7 @@ def pose_weights(where: Where, xyz: np.ndarray, yaw: np.ndarray, storey: np.ndar
         raise UserError(f"{where.source}: no camera pose of the plan lies in a zone, on a route or near a pose with a "
                         f"weight above 0{span}: give coordinates in the model's frame (metres, as in placement.json), "
                         "check storey/z, or set default_weight above 0")
+    _warn(empty)
     return w * (len(w) / w.sum())
 
 
