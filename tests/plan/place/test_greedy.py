@@ -7,7 +7,8 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.plan.score.localizability import information_gain
-from markerplace.plan.place.greedy import GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy, percentile_with_zeros, q_from_v
+from markerplace.plan.place.greedy import (GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy,
+                                          percentile_with_zeros, q_from_v, weighted_q_from_v)
 from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 
@@ -257,3 +258,29 @@ def test_weights_pull_the_pick_to_where_the_cameras_are() -> None:
     w = np.r_[np.zeros(10), np.full(10, 2.0)]
     res = omp_greedy(base, covs, 2, v=100, weights=w)
     assert res.order == [1, 0] and res.gains[0] > 0 and res.gains[1] == 0.0
+
+
+def test_weighted_gain_does_not_depend_on_the_batch_and_q_is_taken_over_seen_candidates() -> None:
+    """Lazy greedy evaluates a candidate alone: its weighted gain must be the one it gets in a
+    batch, bit for bit (q = 100 included, where rounding could miss the threshold); and the
+    q-from-v rule runs over the candidates some weighted pose sees."""
+    rng = np.random.default_rng(7)
+    N, C = 90, 25
+    base, covs = random_problem(rng, N, C, max_cov=60)
+    w = np.where(rng.uniform(size=N) < 0.3, 10.0 / 3.0, 0.0)
+    w *= N / w.sum()
+    for q in (100.0, 97.3, 50.0):
+        prob = GreedyProblem(base.copy(), covs, q, w)
+        together = prob.evaluate(np.arange(C))[0]
+        alone = np.array([prob.evaluate(np.array([m]))[0][0] for m in range(C)])
+        np.testing.assert_array_equal(together, alone)
+        if q == 100.0:  # the largest gain over the weighted poses
+            for m, cov in enumerate(covs):
+                g = information_gain(base[cov.pose_idx], cov.info) if len(cov) else np.zeros(0)
+                assert together[m] == pytest.approx(max(g[w[cov.pose_idx] > 0], default=0.0), rel=1e-12)
+    P = np.array([0.0, 0.0, 5.0, 10.0, 20.0, 40.0])
+    q, eligible = weighted_q_from_v(P, 75.0, True)
+    q_seen, el_seen = q_from_v(P[2:], 75.0)
+    assert q == q_seen and eligible.tolist() == [False, False, *el_seen.tolist()]
+    assert weighted_q_from_v(P, 75.0, False)[0] == q_from_v(P, 75.0)[0]
+    assert weighted_q_from_v(np.zeros(3), 90.0, True) == (100.0, pytest.approx(np.zeros(3, bool)))

@@ -154,6 +154,26 @@ def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
     return 100.0 - p_star, P > p_star
 
 
+def weighted_q_from_v(coverage_pct: np.ndarray, v: float, weighted: bool) -> tuple[float, np.ndarray]:
+    """:func:`q_from_v`, and with pose weights (``plan --where``) taken over the candidates some
+    weighted pose sees (``P_m > 0``): as the planner drops spots no camera pose sees, a spot no
+    weighted pose sees does not compete (nor pull p* to 0, which would make q = 100, the
+    largest gain). When no candidate is seen from a weighted pose, q = 100 and none is eligible
+    (the picks then go by mean gain, 0: the lowest indices), with a warning."""
+    if not weighted:
+        return q_from_v(coverage_pct, v)
+    P = np.asarray(coverage_pct, dtype=float).reshape(-1)
+    seen = P > 0.0
+    eligible = np.zeros(len(P), dtype=bool)
+    if not seen.any():
+        q_from_v(P, v)  # the same errors (v out of range, no candidates)
+        log.warning("no candidate tag is seen from a camera pose with a weight above 0 (--where): the picks are "
+                    "arbitrary; widen the zones or routes, or set default_weight above 0")
+        return 100.0, eligible
+    q, eligible[seen] = q_from_v(P[seen], v)
+    return q, eligible
+
+
 # --------------------------------------------------------------------------------------------
 # Greedy
 # --------------------------------------------------------------------------------------------
@@ -243,21 +263,29 @@ class GreedyProblem:
         """(n,) weighted q-th percentile per segment of the gains padded with zeros: the
         smallest gain x with (weight of the poses whose gain is <= x) >= q/100 of the total
         weight, the unseen poses gaining 0 (``inverted_cdf`` with weights; with every weight 1
-        it is the unweighted rule: the tests check the same picks)."""
+        it is the unweighted rule: the tests check the same picks).
+
+        Each segment is summed on its own, in its own sorted order, so a candidate's gain does
+        not depend on which others are evaluated with it (lazy greedy evaluates it alone); when
+        rounding leaves the last cumulative weight a hair under the threshold (q = 100), the
+        largest gain of a weighted pose is taken, as exact arithmetic would."""
         w = self.weights
         total = float(w.sum())
         thresh = self.q / 100.0 * total  # compared exactly, as numpy's inverted_cdf does
-        seen_w = np.bincount(seg, weights=w[pidx], minlength=n)
-        zero_w = total - seen_w  # weight of the poses that gain nothing
         order = np.lexsort((g, seg))
-        srt, ws, ss = g[order], w[pidx][order], seg[order]
-        cum = np.cumsum(ws)
-        before = np.concatenate([[0.0], np.cumsum(seen_w)[:-1]])  # cumulative weight before each segment
-        reach = zero_w[ss] + cum - before[ss] >= thresh
+        srt, ws = g[order], w[pidx][order]
+        bounds = np.searchsorted(seg[order], np.arange(n + 1))
         out = np.zeros(n)
-        hit_seg, first = np.unique(ss[reach], return_index=True)
-        out[hit_seg] = srt[np.flatnonzero(reach)[first]]
-        out[zero_w >= thresh] = 0.0
+        for j in range(n):
+            a, b = bounds[j], bounds[j + 1]
+            keep = ws[a:b] > 0.0  # poses that weigh nothing cannot move a weighted percentile
+            if not keep.any():
+                continue
+            vals, cum = srt[a:b][keep], np.cumsum(ws[a:b][keep])
+            need = thresh - (total - float(cum[-1]))  # what the seen poses must add to the unseen ones' zeros
+            if need <= 0.0:
+                continue
+            out[j] = vals[min(int(np.searchsorted(cum, need, side="left")), len(vals) - 1)]
         return out
 
 
@@ -301,7 +329,7 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     k = check_k(k, C)
     lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    q, eligible = q_from_v(coverage_percentages(coverages, N, weights), v)
+    q, eligible = weighted_q_from_v(coverage_percentages(coverages, N, weights), v, weights is not None)
     prob = GreedyProblem(lam, coverages, q, weights)
     log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",
               N, C, k, v, q, int(eligible.sum()), lazy)
@@ -365,5 +393,5 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
 
 __all__ = [
     "GreedyProblem", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
-    "omp_greedy", "percentile_with_zeros", "q_from_v",
+    "omp_greedy", "percentile_with_zeros", "q_from_v", "weighted_q_from_v",
 ]
