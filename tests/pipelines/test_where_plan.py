@@ -6,12 +6,15 @@ a route through two of its rooms."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from helpers import FAST, FAST_2_YAWS
 from markerplace.cli.main import main
+from markerplace.config_file import read_config_file
+from markerplace.plan.config import PlanConfig
 
 ZONE = {"type": "FeatureCollection", "features": [
     {"type": "Feature", "properties": {"name": "west strip", "weight": 2},
@@ -43,6 +46,9 @@ def test_plan_with_where_records_it_and_a_plan_without_is_unchanged(tmp_path):
     assert (out / "where.png").is_file() and "where.png" in (out / "report.html").read_text()
     w = np.load(out / "scores.npz")["pose_weight"]
     assert w.sum() == pytest.approx(len(w)) and np.count_nonzero(w) == 4
+    assert read_config_file(out / "config.json", PlanConfig()) == PlanConfig(  # where is a run input, not a setting
+        discretize=replace(PlanConfig().discretize, grid_spacing=1.0, num_yaws=2),
+        placement=replace(PlanConfig().placement, k=2), runtime=replace(PlanConfig().runtime, workers=1))
     assert main(plain) == 0  # again without: the same bytes as the first plan, no stale map
     assert (out / "placement.json").read_bytes() == before
     assert not (out / "where.png").exists() and "where" not in json.loads((out / "config.json").read_text())
