@@ -89,6 +89,7 @@ def test_evaluate_from_a_where_plan_draws_where_test_poses(tmp_path, capsys):
     disc = np.load(plan / "discretization.npz")
     source_x = disc["locations"][disc["location_index"][poses["source_index"]], 0]
     assert len(source_x) == 6 and np.allclose(source_x, 0.5)  # drawn only from the weighted poses
+    assert json.loads((out / "config.json").read_text())["where"] == ZONE  # the plan's, recorded
 
 
 def _route_distance(position) -> float:

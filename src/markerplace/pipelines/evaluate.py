@@ -151,7 +151,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     test_predictions = {key: est for key, est in predictions.items()
                         if key.method != SINGLE and key.test_set in test_poses}
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
-                                  plan_config, scene=scene)
+                                  plan_config, scene=scene, where=None if where is None else where.doc)
     if ceiling is not None:
         with atomic_path(out / "ceiling.md") as tmp:
             tmp.write_text(ceiling_markdown(rows, ceiling[2], sorted(set(config.study.ks)), threshold_label(threshold),

@@ -26,7 +26,8 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(out: Path, scene_name: str, placements, predictions: dict, test_poses: dict,
-                  base_score: np.ndarray, config, plan_config, scene=None) -> tuple[list[dict], str]:
+                  base_score: np.ndarray, config, plan_config, scene=None, where: dict | None = None
+                  ) -> tuple[list[dict], str]:
     """recall.csv, query_errors.npz, tables.md, recall_vs_k.png, config.json and report.html
     (:func:`markerplace.testbed.reporting.page.write_evaluation_report`) from predictions.
 
@@ -38,6 +39,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
             per test image (all NaN where localization failed).
         test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
+        where: the ``--where`` file as read (GeoJSON), recorded in config.json; None: none.
         config, plan_config: the evaluate and plan settings.
         scene: the scene (internal frame), to render report.html's gallery (None: no images).
 
@@ -85,7 +87,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
 
     write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config),
-                                     "environment": environment()})
+                                     "environment": environment(), **({} if where is None else {"where": where})})
 
     write_evaluation_report(out, scene_name, placements, predictions, test_poses, config, plan_config.imaging.camera,
                             scene=scene)
