@@ -97,7 +97,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     result = run_plan(plan_config_from_args(args), scene, args.out, inputs)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, "
-          "gain_first.png, placement.png, config.json")
+          f"gain_first.png, placement.png, {'where.png, ' if args.where else ''}config.json")
     print(f"wrote {result.report}")
     for line in result.changes:
         print(line)
