@@ -28,6 +28,9 @@ Tie and eligibility rules (exact, so plain and lazy greedy agree bit for bit)
   smallest candidate index. Only when no eligible candidate is left are ineligible ones picked,
   ranked by their mean information gain over all N poses (their q-th percentile gain is 0),
   again ties to the smallest index.
+* Pose weights (``plan --where``): ``P_m`` is the share of the total weight that sees m, q comes
+  from v over the candidates with ``P_m > 0`` (:func:`weighted_q_from_v`), gains are weighted
+  percentiles and means; without weights every line above holds as it is.
 * Both keys only shrink as markers are placed (per-pose gains shrink as Lambda grows; a
   percentile and a mean are monotone in every element), so stale keys are upper bounds and
   the lazy greedy returns exactly the plain greedy's sequence.
