@@ -14,6 +14,7 @@ from markerplace.testbed import conditions as cond
 from markerplace.testbed.conditions import CONDITIONS, QueryCondition, degrade_render, set_name, split_set
 
 POSE = np.eye(4)
+K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])  # for 320 x 240 images
 
 
 def _image():
@@ -30,21 +31,21 @@ def _apply(name, index, rgb=None, test_set="weighted", seed=0):
 
     def render(light):
         lights.append(light)
-        return RenderResult(rgb, np.ones(rgb.shape[:2], np.float32), None, POSE)
+        return RenderResult(rgb, np.full(rgb.shape[:2], 10.0, np.float32), None, POSE)
 
-    res, params = degrade_render(POSE, QueryCondition(name, test_set, seed).image(index), render)
+    res, params = degrade_render(POSE, QueryCondition(name, test_set, seed).image(index), render, K)
     return res.rgb, params, lights[0]
 
 
 def test_names_and_registry():
-    assert cond.condition_names() == ("clean", "exposure", "white_balance", "lighting", "noise", "blur")
+    assert cond.condition_names() == ("clean", "exposure", "white_balance", "lighting", "noise", "blur", "occluders")
     assert set_name("weighted", "clean") == "weighted" and set_name("uniform", "blur") == "uniform@blur"
     assert split_set("uniform@blur") == ("uniform", "blur") and split_set("weighted") == ("weighted", "clean")
     for c in CONDITIONS.values():
         assert c.summary and c.__doc__ and c.default_conf.__doc__
 
 
-@pytest.mark.parametrize("name", ["clean", "exposure", "white_balance", "lighting", "noise", "blur"])
+@pytest.mark.parametrize("name", ["clean", "exposure", "white_balance", "lighting", "noise", "blur", "occluders"])
 def test_each_condition_is_deterministic_given_its_seed(name):
     a, pa, la = _apply(name, 3)
     b, pb, lb = _apply(name, 3)
@@ -106,6 +107,36 @@ def test_blur_spreads_a_point_along_its_direction_by_the_drawn_length():
         # segment (L^2 / 12) plus defocus (sigma^2) along; defocus alone across (+ splatting)
         assert var_u == pytest.approx(p["length"] ** 2 / 12 + p["defocus"] ** 2, abs=0.4)
         assert var_v == pytest.approx(p["defocus"] ** 2, abs=0.4)
+
+
+def test_occluders_are_person_sized_and_stand_in_front():
+    img = _image()
+    for i in range(6):
+        out, p, _ = _apply("occluders", i)
+        people = p["people"]
+        assert 1 <= len(people) <= 2 and all(1.0 <= q["distance"] <= 4.0 for q in people)
+        changed = np.any(out != img, axis=2)
+        near = min(people, key=lambda q: q["distance"])
+        cols = np.flatnonzero(changed.any(axis=0))
+        # at least the nearest person's width: fx * 0.5 m / distance pixels (clipped by the border)
+        width = 300.0 * 0.5 / near["distance"]
+        centre = near["u"] * 319
+        visible = min(centre + width / 2, 319) - max(centre - width / 2, 0)
+        assert len(cols) >= visible - 2
+        rows = np.flatnonzero(changed[:, int(np.clip(round(centre), 0, 319))])
+        # from 0.25 m above the optical axis (1.75 m tall, camera at 1.5 m) to the floor, 1.5 m below
+        top, bottom = 119.5 - 300.0 * 0.25 / near["distance"], 119.5 + 300.0 * 1.5 / near["distance"]
+        assert abs(rows.min() - top) <= 1.5 and abs(rows.max() - min(bottom, 239)) <= 1.5
+    # nothing is pasted where the scene is nearer than the person
+    from markerplace.imaging.degrade import occlude
+
+    person = {"distance": 2.0, "u": 0.5, "colour": [50, 50, 50], "folds": np.ones((4, 8)).tolist()}
+    depth = np.full((240, 320), 5.0, np.float32)
+    depth[:, :160] = 1.0  # a wall 1 m away on the left half
+    out = occlude(img, depth, K, [person])
+    changed = np.any(out != img, axis=2)
+    assert not changed[:, :160].any() and changed[:, 160:].sum() > 1000
+    assert np.all(out[changed] == 50)  # colour x folds at 1.0
 
 
 def test_lighting_draws_a_light_set_up_within_its_ranges():

@@ -14,7 +14,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["GAMMA", "exposure", "white_balance", "sensor_noise", "motion_kernel", "motion_blur"]
+__all__ = ["GAMMA", "exposure", "white_balance", "sensor_noise", "motion_kernel", "motion_blur", "occlude"]
 
 #: Display gamma of the power-law encoding assumed for gain changes.
 GAMMA = 2.2
@@ -116,3 +116,46 @@ def motion_blur(rgb: np.ndarray, length: float, angle: float, defocus: float = 0
     if defocus > 0:
         out = cv2.GaussianBlur(out, (0, 0), float(defocus), borderType=cv2.BORDER_REPLICATE)
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def occlude(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, people: list[dict], width: float = 0.5,
+            height: float = 1.75, eye: float = 1.5) -> np.ndarray:
+    """Paste people standing in front of a level camera: each an upright ellipse ``width`` x
+    ``height`` metres (its top ``height - eye`` metres above the optical axis, its feet ``eye``
+    metres below: the camera held at ``eye`` metres) at ``distance`` metres, so ``fx * width /
+    distance`` pixels wide; it covers only pixels whose rendered depth is beyond it (or where
+    nothing was hit). Fill: the person's colour times a smooth fold pattern (0.6..1.0).
+    Farther people are pasted first.
+
+    Args:
+        rgb: (H, W, 3) uint8.
+        depth: (H, W) planar depth, metres (0: nothing hit).
+        K: (3, 3) intrinsics.
+        people: dicts with ``distance`` (m), ``u`` (centre column as a fraction of the width),
+            ``colour`` (3 values 0..255), ``folds`` ((4, 8) values in [0, 1], the pattern,
+            stretched over the person).
+    Returns:
+        (H, W, 3) uint8.
+    """
+    out = np.array(rgb, np.uint8, copy=True)
+    H, W = out.shape[:2]
+    fx, fy, cy = float(K[0, 0]), float(K[1, 1]), float(K[1, 2])
+    vs, us = np.mgrid[:H, :W]
+    for p in sorted(people, key=lambda q: -q["distance"]):
+        d = float(p["distance"])
+        uc, half_w = float(p["u"]) * (W - 1), 0.5 * fx * width / d
+        top, bottom = cy - fy * (height - eye) / d, cy + fy * eye / d
+        vc, half_h = 0.5 * (top + bottom), 0.5 * (bottom - top)
+        inside = ((us - uc) / half_w) ** 2 + ((vs - vc) / half_h) ** 2 <= 1.0
+        mask = inside & ((depth > d) | (depth <= 0))
+        if not mask.any():
+            continue
+        x0, y0 = int(max(np.floor(uc - half_w), 0)), int(max(np.floor(top), 0))
+        x1, y1 = int(min(np.ceil(uc + half_w), W - 1)) + 1, int(min(np.ceil(bottom), H - 1)) + 1
+        folds = cv2.resize(np.asarray(p["folds"], np.float32), (max(x1 - x0, 1), max(y1 - y0, 1)),
+                           interpolation=cv2.INTER_CUBIC)
+        fill = np.zeros((H, W), np.float32)
+        fill[y0:y1, x0:x1] = 0.6 + 0.4 * np.clip(folds, 0.0, 1.0)
+        colour = np.asarray(p["colour"], np.float32).reshape(1, 3)
+        out[mask] = np.clip(np.rint(fill[mask][:, None] * colour), 0, 255).astype(np.uint8)
+    return out

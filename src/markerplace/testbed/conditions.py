@@ -86,8 +86,10 @@ class Condition:
         """The light set-up to render with (None: the map's)."""
         return None
 
-    def filter(self, rgb: np.ndarray, params: dict, rng: np.random.Generator) -> np.ndarray:
-        """The degraded (H, W, 3) uint8 image (``rng``: the same stream, after :meth:`draw`)."""
+    def filter(self, rgb: np.ndarray, params: dict, rng: np.random.Generator, depth: np.ndarray | None = None,
+               K: np.ndarray | None = None) -> np.ndarray:
+        """The degraded (H, W, 3) uint8 image (``rng``: the same stream, after :meth:`draw`;
+        ``depth``: (H, W) the render's planar depth, metres; ``K``: (3, 3) intrinsics)."""
         return rgb
 
 
@@ -129,7 +131,7 @@ class Exposure(Condition):
     def draw(self, rng, world_from_cam):
         return {"ev": _uniform(rng, (-self.conf.max_ev, self.conf.max_ev))}
 
-    def filter(self, rgb, params, rng):
+    def filter(self, rgb, params, rng, depth=None, K=None):
         return degrade.exposure(rgb, params["ev"])
 
 
@@ -156,7 +158,7 @@ class WhiteBalance(Condition):
     def draw(self, rng, world_from_cam):
         return {"shift": _uniform(rng, (-self.conf.max_shift, self.conf.max_shift))}
 
-    def filter(self, rgb, params, rng):
+    def filter(self, rgb, params, rng, depth=None, K=None):
         return degrade.white_balance(rgb, params["shift"])
 
 
@@ -234,7 +236,7 @@ class Noise(Condition):
     def draw(self, rng, world_from_cam):
         return {"shot": _uniform(rng, self.conf.shot), "read": float(self.conf.read)}
 
-    def filter(self, rgb, params, rng):
+    def filter(self, rgb, params, rng, depth=None, K=None):
         return degrade.sensor_noise(rgb, rng, params["shot"], params["read"])
 
 
@@ -264,8 +266,49 @@ class Blur(Condition):
         return {"length": _uniform(rng, self.conf.length), "angle": float(rng.uniform(0.0, np.pi)),
                 "defocus": _uniform(rng, self.conf.defocus)}
 
-    def filter(self, rgb, params, rng):
+    def filter(self, rgb, params, rng, depth=None, K=None):
         return degrade.motion_blur(rgb, params["length"], params["angle"], params["defocus"])
+
+
+@dataclass(frozen=True)
+class OccludersConfig:
+    """People in front of the camera (:func:`markerplace.imaging.degrade.occlude`).
+
+    Attributes:
+        people: range of the number of people per image (inclusive, uniform).
+        distance: range of each one's distance from the camera, metres (uniform).
+        width, height: a person's size, metres (an upright ellipse).
+        eye: camera height above the floor, metres (the queries are level cameras).
+        colour: range of each clothing colour channel, 8-bit (dark to mid: 20..120).
+    """
+
+    people: tuple = (1, 2)
+    distance: tuple = (1.0, 4.0)
+    width: float = 0.5
+    height: float = 1.75
+    eye: float = 1.5
+    colour: tuple = (20.0, 120.0)
+
+
+@CONDITIONS.register
+class Occluders(Condition):
+    """People-sized occluders pasted in front of the scene where the depth is beyond them."""
+
+    name = "occluders"
+    summary = "1-2 people 1-4 m in front of the camera"
+    Config = OccludersConfig
+    default_conf = OccludersConfig()
+
+    def draw(self, rng, world_from_cam):
+        c = self.conf
+        n = int(rng.integers(int(c.people[0]), int(c.people[1]) + 1))
+        return {"people": [{"distance": _uniform(rng, c.distance), "u": float(rng.uniform()),
+                            "colour": rng.uniform(c.colour[0], c.colour[1], 3).tolist(),
+                            "folds": rng.uniform(0.0, 1.0, (4, 8)).tolist()} for _ in range(n)]}
+
+    def filter(self, rgb, params, rng, depth=None, K=None):
+        c = self.conf
+        return degrade.occlude(rgb, depth, K, params["people"], c.width, c.height, c.eye)
 
 
 @dataclass(frozen=True)
@@ -309,16 +352,17 @@ class QueryCondition:
         return ImageCondition(self.name, self.settings, seed)
 
 
-def degrade_render(world_from_cam: np.ndarray, cond: ImageCondition, render) -> tuple:
+def degrade_render(world_from_cam: np.ndarray, cond: ImageCondition, render, K: np.ndarray | None = None) -> tuple:
     """(render result, drawn parameters) of the view at (4, 4) ``world_from_cam`` under
     ``cond``: ``render(lighting)`` makes the :class:`~markerplace.render.renderer.RenderResult`
-    with that light set-up (None: the map's), whose RGB is then filtered."""
+    (with depth) with that light set-up (None: the map's), whose RGB is then filtered (``K``:
+    the (3, 3) intrinsics, for conditions sized in metres)."""
     part = CONDITIONS.lookup(cond.name)(cond.conf)
     rng = np.random.default_rng(list(cond.seed))
     params = part.draw(rng, world_from_cam)
     light = part.lighting(params)
     res = render(light)
-    return replace(res, rgb=part.filter(res.rgb, params, rng)), params
+    return replace(res, rgb=part.filter(res.rgb, params, rng, res.depth, K)), params
 
 
 def render_query(engine, world_from_cam: np.ndarray, markers, cond: ImageCondition | None):
@@ -335,4 +379,4 @@ def render_query(engine, world_from_cam: np.ndarray, markers, cond: ImageConditi
         finally:
             engine.renderer.set_lighting(None)
 
-    return degrade_render(world_from_cam, cond, render)[0]
+    return degrade_render(world_from_cam, cond, render, engine.K)[0]

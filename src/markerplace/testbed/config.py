@@ -77,7 +77,7 @@ class TestSetConfig:
                                           doc="comma list of query conditions; each test set is localized under "
                                               "each, reported per condition (docs/design.md, *Query conditions*): "
                                               "`clean` (as the map), `exposure`, `white_balance`, `lighting`, "
-                                              "`noise`, `blur`")
+                                              "`noise`, `blur`, `occluders`")
 
 
 @dataclass(frozen=True)
