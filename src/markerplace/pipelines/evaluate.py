@@ -7,7 +7,8 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
 2. marker sets: none, OMP (nested k), random and uniform runs, extra placement files
    (:func:`markerplace.testbed.marker_sets.build_placements`);
 3. test poses per test set, identical for every method (:func:`markerplace.testbed.poses.cached_test_poses`);
-4. marker-free map and query features and the VLAD codebook
+4. marker-free map and query features and the VLAD codebook; the queries once per query
+   condition (``--conditions``, :mod:`markerplace.testbed.conditions`; the map stays clean)
    (:func:`markerplace.testbed.map_setup.marker_free_images`);
 5. per placement: its map (only images with one of its markers in view are re-rendered) and
    the predictions of every image set (:func:`markerplace.testbed.predict.predict_placements`);
@@ -153,8 +154,9 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
                                   plan_config, scene=scene)
     if ceiling is not None:
         with atomic_path(out / "ceiling.md") as tmp:
-            tmp.write_text(ceiling_markdown([r for r in rows if r["condition"] == CLEAN], ceiling[2], sorted(set(config.study.ks)), threshold_label(threshold),
-                                            ceiling[3]))
+            clean_rows = [r for r in rows if r["condition"] == CLEAN]  # the ceiling is measured clean
+            tmp.write_text(ceiling_markdown(clean_rows, ceiling[2], sorted(set(config.study.ks)),
+                                            threshold_label(threshold), ceiling[3]))
     if diag.calibration:
         write_calibration_report(out, scene.name, score_outcomes(data, plan_config, placements,
                                                                   map_successes(predictions, map_poses)))
