@@ -381,7 +381,7 @@ NO_FLAG: dict[str, str] = {
     "placement.method@study": "a study evaluates OMP",
     **{f"evaluate.{path}@study": "a study fixes it (OMP against no markers, the published localizer, no "
                                   "diagnostics) or varies it itself (--vs, --shifts, --scales, --no-detection-study)"
-       for path in ("test.tests", "test.sets", "study.methods", "study.runs", "study.tag_scale", "study.shift",
+       for path in ("test.tests", "test.sets", "test.conditions", "study.methods", "study.runs", "study.tag_scale", "study.shift",
                     "study.tag_ids", "localization.localizer", "localization.use_tags", "localization.tag_corners",
                     "diagnostics.ceiling", "diagnostics.calibration")},
 }

@@ -7,7 +7,8 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
 2. marker sets: none, OMP (nested k), random and uniform runs, extra placement files
    (:func:`markerplace.testbed.marker_sets.build_placements`);
 3. test poses per test set, identical for every method (:func:`markerplace.testbed.poses.cached_test_poses`);
-4. marker-free map and query features and the VLAD codebook
+4. marker-free map and query features and the VLAD codebook; the queries once per query
+   condition (``--conditions``, :mod:`markerplace.testbed.conditions`; the map stays clean)
    (:func:`markerplace.testbed.map_setup.marker_free_images`);
 5. per placement: its map (only images with one of its markers in view are re-rendered) and
    the predictions of every image set (:func:`markerplace.testbed.predict.predict_placements`);
@@ -45,6 +46,7 @@ from markerplace.runtime.executor import make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
 from markerplace.testbed.calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
 from markerplace.testbed.ceiling import SINGLE, ceiling_markdown, run_ceiling, single_placements
+from markerplace.testbed.conditions import CLEAN, split_set
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.images import TestbedImaging
 from markerplace.testbed.map_setup import map_base_key, marker_free_images, testbed_imaging_config
@@ -137,25 +139,27 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         union = list({marker_key(m): m for p in placements + singles for m in p.markers}.values())
         tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
         ctx, sets = marker_free_images(tb, map_poses, test_poses, cache_dir, base_key, imaging, config.localization,
-                                       config.seed, timings, reuse_unchanged)
+                                       config.seed, timings, reuse_unchanged, config.test.conditions, config.pose_seed)
         if diag.calibration:
             sets[MAP_SET] = map_image_set(ctx.map_base, data.disc.location_index)
         predictions = predict_placements(ctx, placements, sets)
         threshold = main_threshold(config.thresholds)  # the ceiling's picks and ceiling.md's table
-        ceiling = run_ceiling(ctx, placements, singles, sets, test_poses, candidates, plan_config.placement.tag_size,
+        clean = {name: s for name, s in sets.items() if s.condition is None}  # the ceiling is measured clean
+        ceiling = run_ceiling(ctx, placements, singles, clean, test_poses, candidates, plan_config.placement.tag_size,
                               config.study.ks, config.seed, threshold, by_spot) if diag.ceiling else None
     if ceiling is not None:
         placements = placements + ceiling[0]
         predictions.update(ceiling[1])
     t0 = time.perf_counter()
     test_predictions = {key: est for key, est in predictions.items()
-                        if key.method != SINGLE and key.test_set in test_poses}
+                        if key.method != SINGLE and split_set(key.test_set)[0] in test_poses}
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
                                   plan_config, scene=scene, where=None if where is None else where.doc)
     if ceiling is not None:
         with atomic_path(out / "ceiling.md") as tmp:
-            tmp.write_text(ceiling_markdown(rows, ceiling[2], sorted(set(config.study.ks)), threshold_label(threshold),
-                                            ceiling[3]))
+            clean_rows = [r for r in rows if r["condition"] == CLEAN]  # the ceiling is measured clean
+            tmp.write_text(ceiling_markdown(clean_rows, ceiling[2], sorted(set(config.study.ks)),
+                                            threshold_label(threshold), ceiling[3]))
     if diag.calibration:
         write_calibration_report(out, scene.name, score_outcomes(data, plan_config, placements,
                                                                   map_successes(predictions, map_poses)))

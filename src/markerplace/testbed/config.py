@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 from markerplace.errors import UserError
 from markerplace.settings import SEED_MAX, setting
+from markerplace.testbed.conditions import CLEAN, CONDITIONS
 from markerplace.testbed.metrics import THRESHOLDS
 from markerplace.testbed.marker_sets import NO_MARKERS, method_names
 from markerplace.testbed.poses import ALL_TEST_SETS, TEST_SETS, WHERE_SET
@@ -52,6 +53,9 @@ class TestSetConfig:
         sets: ``weighted`` (towards low scores), ``uniform`` and, with ``--where``, ``where``.
         seed: seed of the test poses and the shift signs alone; None = the run's ``seed``.
         min_clearance: test cameras need this clearance (metres) from non-free cells.
+        conditions: query conditions (:mod:`markerplace.testbed.conditions`): every test set
+            is localized under each (``clean``: as the map is rendered, the default, every
+            result before conditions existed); the map stays clean.
     """
 
     __test__ = False
@@ -70,6 +74,13 @@ class TestSetConfig:
                                help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new "
                                     "test set without changing a built-in scene")
     min_clearance: float = 0.1
+    conditions: tuple[str, ...] = setting((CLEAN,), flag="--conditions", commands=("evaluate",), convert=_name_list,
+                                          help=lambda: "comma list of query conditions, the test images taken as a "
+                                          "phone would (the map stays clean): " + CONDITIONS.help(),
+                                          doc="comma list of query conditions; each test set is localized under "
+                                              "each, reported per condition (docs/design.md, *Query conditions*): "
+                                              "`clean` (as the map), `exposure`, `white_balance`, `lighting`, "
+                                              "`noise`, `blur`, `occluders`")
 
 
 @dataclass(frozen=True)
@@ -221,6 +232,10 @@ def validate_evaluate_config(config: EvaluateConfig, where: bool = False) -> Non
                         "--plan of a plan made with --where)")
     if any(m not in method_names() for m in methods):
         raise UserError(f"--methods {','.join(methods)!r} is not valid: use a comma list of {', '.join(method_names())}")
+    conds = config.test.conditions
+    if not conds or any(c not in CONDITIONS for c in conds) or len(set(conds)) != len(conds):
+        raise UserError(f"--conditions {','.join(conds)!r} is not valid: use a comma list of distinct "
+                        f"{', '.join(CONDITIONS.names())}")
     LOCALIZERS.lookup(config.localization.localizer)
     diag = config.diagnostics
     if (diag.ceiling or diag.calibration) and NO_MARKERS not in methods:
