@@ -103,7 +103,14 @@ def _scene_buffers(ctx, parts: Sequence[MeshPart], cull: bool) -> tuple:
             offset += len(rec)
         data, faces = np.concatenate(records), np.concatenate(faces)
         chunks = chunk_triangles(data["pos"][faces])
-        index = faces[chunks.order].astype(np.uint32)
+        # vertices renumbered in order of first use, so a chunk's triangles index a compact range
+        faces = faces[chunks.order].reshape(-1)
+        used, first_use = np.unique(faces, return_index=True)
+        by_first_use = used[np.argsort(first_use, kind="stable")]
+        new_index = np.empty(len(data), np.int64)
+        new_index[by_first_use] = np.arange(len(by_first_use))
+        index = new_index[faces].astype(np.uint32)
+        data = data[by_first_use]
         return ctx.buffer(data.tobytes()), index.size, chunks, ctx.buffer(index.tobytes())
     data = np.concatenate([part_vertices(p) for p in parts])
     chunks = chunk_triangles(data["pos"].reshape(-1, 3, 3))
