@@ -16,7 +16,7 @@ the configs are::
     tag_size = 0.3
 
 A ``config.json`` written by ``plan`` is read the same way (its ``scene``, ``scene_options``,
-``existing_markers`` and ``exclude`` are the run's inputs, given on the command line again), so
+``existing_markers``, ``exclude`` and ``where`` are the run's inputs, given on the command line again), so
 ``plan SCENE --config OLD/config.json --out NEW`` plans what OLD planned. Flags on the command
 line override the file. A key the config does not have or a value out of its bounds is one
 line (exit code 2) naming the key and what to give (:class:`~markerplace.errors.UserError`).
@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["read_config_file", "RUN_RECORD_KEYS"]
 
-RUN_RECORD_KEYS = ("scene", "scene_options", "existing_markers", "exclude")
+RUN_RECORD_KEYS = ("scene", "scene_options", "existing_markers", "exclude", "where")
 """Top-level keys of a plan's ``config.json`` that record the run's inputs, not settings."""
 
 LEGACY_DISCRETIZE_KEYS = ("marker_spacing", "normal_diff_deg", "tag_border", "flatness_tol", "max_normal_z",
@@ -87,9 +87,9 @@ def read_config_file(path: str | Path, base: Any) -> Any:
         if not isinstance(data, dict):
             raise UserError(f"{what} is not a JSON object of settings: give a plan's config.json")
         records = {k: data.pop(k) for k in RUN_RECORD_KEYS if k in data}
-        if records.get("existing_markers") or records.get("exclude"):
-            log.warning("%s: the run it records had --existing or --exclude: give them again (a config file "
-                        "holds settings only)", what)
+        if records.get("existing_markers") or records.get("exclude") or records.get("where"):
+            log.warning("%s: the run it records had --existing, --exclude or --where: give them again (a config "
+                        "file holds settings only)", what)
         data = upgrade_legacy(data)
     else:
         raise UserError(f"{what}: give a .toml file or a plan's config.json (the suffix says which)")

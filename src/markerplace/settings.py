@@ -329,7 +329,7 @@ _COMMON_RUN_OPTIONS = {
 }
 
 RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
-    "plan": {**_SCENE_RUN_OPTIONS, "--out": None,
+    "plan": {**_SCENE_RUN_OPTIONS, "--out": None, "--where": None,
              "--config": ("none", "settings from a TOML file or a plan's `config.json` (see "
                                   "[Settings files](#settings-files-plan---config)); options given on the command "
                                   "line override it"),
@@ -347,7 +347,7 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                  "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
                                  "the held-out ceiling's splits and (unless `--test-seed`) the test poses; with "
                                  "`--plan` the plan's"),
-                 "--out": None,
+                 "--out": None, "--where": None,
                  "--placements": ("none", "also evaluate every `placement.json` under DIR (e.g. from `plan`) as a "
                                           "method (checked before any work)"),
                  "--plan": ("none", "start from a finished `plan` folder (PLAN_DIR): its scene, settings and placement "
@@ -381,7 +381,7 @@ NO_FLAG: dict[str, str] = {
     "placement.method@study": "a study evaluates OMP",
     **{f"evaluate.{path}@study": "a study fixes it (OMP against no markers, the published localizer, no "
                                   "diagnostics) or varies it itself (--vs, --shifts, --scales, --no-detection-study)"
-       for path in ("test.tests", "test.sets", "study.methods", "study.runs", "study.tag_scale", "study.shift",
+       for path in ("test.tests", "test.sets", "test.conditions", "study.methods", "study.runs", "study.tag_scale", "study.shift",
                     "study.tag_ids", "localization.localizer", "localization.use_tags", "localization.tag_corners",
                     "diagnostics.ceiling", "diagnostics.calibration")},
 }

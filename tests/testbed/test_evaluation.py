@@ -88,6 +88,27 @@ def test_weighted_sampling_prefers_low_scores():
     assert scores[w.source_index].mean() < scores[u.source_index].mean() - 2.0
 
 
+def test_where_sampling_follows_the_pose_weights_with_the_usual_jitter():
+    """``--test-sets where``: source poses in proportion to the where weights (none where the
+    weight is 0), perturbed as every test set; it needs weights."""
+    poses, yaws = _feasible()
+    weights = np.zeros(len(poses))
+    weights[:40] = 3.0
+    weights[40:48] = 1.0  # 3 : 1 per pose, 40 : 8 poses -> 15 : 1 by set
+    occ, origin, res = _open_grid()
+    free = tposes.free_space_checker(occ, origin, res, 0.1)
+    cfg = tposes.TestPoseConfig(num=1600, mode="where", seed=2)
+    tp = tposes.sample_test_poses(poses, np.zeros(len(poses)), 0.5, cfg, free, weights)
+    assert tp.source_index.max() < 48
+    assert np.mean(tp.source_index < 40) == pytest.approx(15 / 16, abs=0.02)
+    assert np.abs(tp.offset_xy).max() <= 0.25 and np.degrees(np.abs(tp.offset_yaw)).max() <= 22.5
+    np.testing.assert_allclose(tposes.sampling_probabilities(np.zeros(4), "where", np.array([1.0, 0, 3, 0])),
+                               [0.25, 0, 0.75, 0])
+    with pytest.raises(UserError, match="needs --where FILE"):
+        tposes.sampling_probabilities(np.zeros(4), "where")
+    assert tposes.ALL_TEST_SETS.index("weighted") == 0 and tposes.ALL_TEST_SETS.index("uniform") == 1  # seeds kept
+
+
 def test_perturbation_bounds_and_free_space():
     poses, yaws = _feasible()
     occ, origin, res = _open_grid()

@@ -59,10 +59,10 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     rendered = []
     real = TestbedImaging.render_iter
 
-    def counting(self, world_from_cam, indices, markers, map_only, desc):
+    def counting(self, world_from_cam, indices, markers, map_only, desc, condition=None):
         if markers:
             rendered.extend((desc, int(i)) for i in indices)
-        return real(self, world_from_cam, indices, markers, map_only, desc)
+        return real(self, world_from_cam, indices, markers, map_only, desc, condition)
 
     monkeypatch.setattr(TestbedImaging, "render_iter", counting)
     plan = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=4),
@@ -131,10 +131,10 @@ def test_candidate_tag_ids_share_renders(tmp_path, monkeypatch):
     real = TestbedImaging.render_iter
     mode = {"now": ""}
 
-    def counting(self, world_from_cam, indices, markers, map_only, desc):
+    def counting(self, world_from_cam, indices, markers, map_only, desc, condition=None):
         if markers:
             counts[mode["now"]] = counts.get(mode["now"], 0) + len(indices)
-        return real(self, world_from_cam, indices, markers, map_only, desc)
+        return real(self, world_from_cam, indices, markers, map_only, desc, condition)
 
     monkeypatch.setattr(TestbedImaging, "render_iter", counting)
     base = ["evaluate", "tiny", "--tests", "12", "--test-sets", "weighted", "--k", "2,3", "--runs", "2",

@@ -13,6 +13,7 @@ from markerplace.errors import UserError
 from markerplace.pipelines.evaluate import RunInputs, evaluate
 from markerplace.pipelines.from_plan import start_from_plan
 from markerplace.plan.config import PlanConfig
+from markerplace.plan.where import load_where
 from markerplace.scene.spec import SceneSpec
 from markerplace.testbed.config import validate_evaluate_config
 from dataclasses import replace
@@ -37,20 +38,21 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     the recall table at (5 cm, 5 deg) and what it wrote. With ``--plan``, the scene, the plan's
     settings and its placement come from the plan folder (:mod:`markerplace.pipelines.from_plan`)."""
     config = evaluate_config_from_args(args)
-    validate_evaluate_config(config)  # its budgets are valid before the plan settings use them
+    # its budgets are valid before the plan settings use them (a --plan may bring a where file)
+    validate_evaluate_config(config, where=args.where is not None or args.plan is not None)
     inputs = RunInputs(force=args.force, adopt=args.adopt, progress=not getattr(args, "quiet", False))
     if args.plan is not None:
         start = start_from_plan(args.plan, values_from_args(args, PlanConfig(), "evaluate"), config,
                                 ks_given=args.k is not None, scene=args.scene, up=args.up,
-                                unit_scale=args.unit_scale, seed=args.seed)
+                                unit_scale=args.unit_scale, seed=args.seed, where=args.where)
         result = evaluate(start.scene_spec, start.plan_config, start.config, args.out, args.placements, inputs,
-                          plan=start.folder)
+                          plan=start.folder, where=start.where)
     elif args.scene is None:
         raise UserError("evaluate needs a scene (a built-in name or a mesh file) or --plan PLAN_DIR")
     else:
         scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed or 0)
         result = evaluate(scene, plan_config_for_budgets(args, config.study.ks), config, args.out, args.placements,
-                          inputs)
+                          inputs, where=load_where(args.where) if args.where else None)
     print(result.summary)
     extra = "".join(f", {f}" for f, on in (("ceiling.md", args.ceiling), ("calibration.md, calibration.png, map_outcomes.npz",
                                                                           args.calibration)) if on)
@@ -78,6 +80,9 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                         "method's), its cached stages reused; the folder is only read")
     p.add_argument("--placements", default=None, metavar="DIR",
                    help="folder of placement.json files (e.g. from `markerplace plan`) evaluated as extra methods")
+    p.add_argument("--where", default=None, metavar="FILE",
+                   help="GeoJSON file of where the cameras will be (docs/where.md): the methods weigh the camera "
+                        "poses by it and --test-sets where draws test images from it (with --plan: the plan's)")
     study = p.add_argument_group("study switches")
     diagnostics = p.add_argument_group("diagnostics (each costs extra localizations)")
     add_setting_args(p, EvaluateConfig(), "evaluate", {"localization": study, "diagnostics": diagnostics},

@@ -92,12 +92,12 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan`, then what it wrote."""
-    inputs = PlanInputs(existing=args.existing, exclude=args.exclude, paper=args.paper, force=args.force,
+    inputs = PlanInputs(existing=args.existing, exclude=args.exclude, where=args.where, paper=args.paper, force=args.force,
                         adopt=args.adopt, progress=not args.quiet)
     scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     result = run_plan(plan_config_from_args(args), scene, args.out, inputs)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, "
-          "gain_first.png, placement.png, config.json")
+          f"gain_first.png, placement.png, {'where.png, ' if args.where else ''}config.json")
     print(f"wrote {result.report}")
     for line in result.changes:
         print(line)
@@ -158,6 +158,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON file of spots (x, y, z, radius) and boxes where no tag may go, in the model's "
                              "coordinates (e.g. the rejected.json of report.html's review buttons); applied when "
                              "placing, so a re-run reuses every cached stage (see docs/cli.md)")
+    p_plan.add_argument("--where", default=None, metavar="FILE",
+                        help="GeoJSON file of where the cameras will be: zones, routes (width, heading) and poses "
+                             "of use in the model's coordinates (docs/where.md); the objective, the predicted recall "
+                             "and the bounds weigh each camera pose by it; applied after discretize, so a re-run "
+                             "reuses every cached stage")
 
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "

@@ -7,7 +7,8 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
 2. marker sets: none, OMP (nested k), random and uniform runs, extra placement files
    (:func:`markerplace.testbed.marker_sets.build_placements`);
 3. test poses per test set, identical for every method (:func:`markerplace.testbed.poses.cached_test_poses`);
-4. marker-free map and query features and the VLAD codebook
+4. marker-free map and query features and the VLAD codebook; the queries once per query
+   condition (``--conditions``, :mod:`markerplace.testbed.conditions`; the map stays clean)
    (:func:`markerplace.testbed.map_setup.marker_free_images`);
 5. per placement: its map (only images with one of its markers in view are re-rendered) and
    the predictions of every image set (:func:`markerplace.testbed.predict.predict_placements`);
@@ -37,6 +38,7 @@ from markerplace.pipelines.plan import prepare
 from markerplace.pipelines.size_guard import check_first_guess
 from markerplace.plan.config import validate
 from markerplace.plan.folder import PlanFolder
+from markerplace.plan.where import Where
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
 from markerplace.runtime.cluster import check_scheduler
@@ -44,6 +46,7 @@ from markerplace.runtime.executor import make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
 from markerplace.testbed.calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
 from markerplace.testbed.ceiling import SINGLE, ceiling_markdown, run_ceiling, single_placements
+from markerplace.testbed.conditions import CLEAN, split_set
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.images import TestbedImaging
 from markerplace.testbed.map_setup import map_base_key, marker_free_images, testbed_imaging_config
@@ -77,7 +80,7 @@ class EvaluationResult:
 def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placements_dir: str | Path | None = None,
                    imaging_config=None, progress: bool = True, reuse_unchanged: bool = True,
                    work_dir: str | Path | None = None, extra_placements: dict | None = None,
-                   plan: PlanFolder | None = None) -> EvaluationResult:
+                   plan: PlanFolder | None = None, where: Where | None = None) -> EvaluationResult:
     """Run the paper's experiments and write every output into ``out_dir``.
 
     Args:
@@ -97,9 +100,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         plan: the plan folder of ``evaluate --plan`` (:mod:`markerplace.pipelines.from_plan`):
             its cached stages are reused and its placement is its method's marker set;
             ``scene_spec`` and ``plan_config`` must be its own (:func:`~markerplace.pipelines.from_plan.start_from_plan`).
+        where: the ``--where`` file (:mod:`markerplace.plan.where`): the placement methods weigh
+            the poses by it (as ``plan --where``) and the ``where`` test set is drawn from it.
     """
     t_all, timings = time.perf_counter(), {}
-    validate_evaluate_config(config)
+    validate_evaluate_config(config, where is not None)
     validate(plan_config)
     out = Path(out_dir)
     run_folder.make_dirs(out)
@@ -111,7 +116,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
-                       k=max(config.study.ks))
+                       k=max(config.study.ks), where=where)
         calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0
@@ -134,25 +139,27 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         union = list({marker_key(m): m for p in placements + singles for m in p.markers}.values())
         tb = TestbedImaging(scene_spec, imaging, union, executor, progress)
         ctx, sets = marker_free_images(tb, map_poses, test_poses, cache_dir, base_key, imaging, config.localization,
-                                       config.seed, timings, reuse_unchanged)
+                                       config.seed, timings, reuse_unchanged, config.test.conditions, config.pose_seed)
         if diag.calibration:
             sets[MAP_SET] = map_image_set(ctx.map_base, data.disc.location_index)
         predictions = predict_placements(ctx, placements, sets)
         threshold = main_threshold(config.thresholds)  # the ceiling's picks and ceiling.md's table
-        ceiling = run_ceiling(ctx, placements, singles, sets, test_poses, candidates, plan_config.placement.tag_size,
+        clean = {name: s for name, s in sets.items() if s.condition is None}  # the ceiling is measured clean
+        ceiling = run_ceiling(ctx, placements, singles, clean, test_poses, candidates, plan_config.placement.tag_size,
                               config.study.ks, config.seed, threshold, by_spot) if diag.ceiling else None
     if ceiling is not None:
         placements = placements + ceiling[0]
         predictions.update(ceiling[1])
     t0 = time.perf_counter()
     test_predictions = {key: est for key, est in predictions.items()
-                        if key.method != SINGLE and key.test_set in test_poses}
+                        if key.method != SINGLE and split_set(key.test_set)[0] in test_poses}
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
-                                  plan_config, scene=scene)
+                                  plan_config, scene=scene, where=None if where is None else where.doc)
     if ceiling is not None:
         with atomic_path(out / "ceiling.md") as tmp:
-            tmp.write_text(ceiling_markdown(rows, ceiling[2], sorted(set(config.study.ks)), threshold_label(threshold),
-                                            ceiling[3]))
+            clean_rows = [r for r in rows if r["condition"] == CLEAN]  # the ceiling is measured clean
+            tmp.write_text(ceiling_markdown(clean_rows, ceiling[2], sorted(set(config.study.ks)),
+                                            threshold_label(threshold), ceiling[3]))
     if diag.calibration:
         write_calibration_report(out, scene.name, score_outcomes(data, plan_config, placements,
                                                                   map_successes(predictions, map_poses)))
@@ -185,11 +192,12 @@ def open_evaluation_folder(command: str, out: str | Path, scene_spec, plan_confi
 
 
 def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: str | Path | None = None,
-             inputs: RunInputs = RunInputs(), plan: PlanFolder | None = None) -> EvaluationResult:
+             inputs: RunInputs = RunInputs(), plan: PlanFolder | None = None,
+             where: Where | None = None) -> EvaluationResult:
     """``markerplace evaluate``: every input checked (placement files read) before any work,
     the run folder opened, then :func:`run_evaluation` (``plan``: ``evaluate --plan``, see
-    :mod:`markerplace.pipelines.from_plan`)."""
-    validate_evaluate_config(config)
+    :mod:`markerplace.pipelines.from_plan`; ``where``: ``--where`` or the plan's)."""
+    validate_evaluate_config(config, where is not None)
     validate(plan_config)
     if not config.study.methods and not placements_dir:
         raise UserError(f"--methods is empty: give a comma list such as {','.join(method_names())} (or --placements DIR)")
@@ -200,4 +208,4 @@ def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: s
         raise UserError(f"--out {out} is the --plan folder: give the evaluation its own folder (the plan's is only read)")
     run_config = open_evaluation_folder("evaluate", out, scene_spec, plan_config, config, inputs, len(placement_files))
     return run_evaluation(scene_spec, run_config, config, out, placements_dir=placements_dir, progress=inputs.progress,
-                          plan=plan)
+                          plan=plan, where=where)

@@ -27,6 +27,7 @@ from markerplace.errors import UserError
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.folder import PlanFolder, read_plan_folder
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.plan.where import Where, load_where, parse_where
 from markerplace.runtime import cache
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import world_offset
@@ -56,12 +57,14 @@ class PlanStart:
             = the largest evaluated budget.
         config: the evaluation's settings: budgets at most the plan's k, the plan's method among
             the methods, the seed the plan's scene seed.
+        where: the plan's ``--where`` file (:mod:`markerplace.plan.where`), or None.
     """
 
     folder: PlanFolder
     scene_spec: SceneSpec
     plan_config: PlanConfig
     config: object
+    where: Where | None = None
 
 
 def _differs(given, planned) -> bool:
@@ -81,7 +84,8 @@ def _check_scene(folder: PlanFolder, scene: str | None, up, unit_scale, seed) ->
 
 
 def start_from_plan(plan_dir: str | Path, plan_values: dict, config, *, ks_given: bool, scene: str | None = None,
-                    up: str | None = None, unit_scale: float | None = None, seed: int | None = None) -> PlanStart:
+                    up: str | None = None, unit_scale: float | None = None, seed: int | None = None,
+                    where: str | None = None) -> PlanStart:
     """Read ``plan_dir`` and settle the evaluation's settings (see the module docstring).
 
     Args:
@@ -91,6 +95,8 @@ def start_from_plan(plan_dir: str | Path, plan_values: dict, config, *, ks_given
         config: the :class:`~markerplace.testbed.config.EvaluateConfig` of the command line.
         ks_given: ``--k`` was given (else the plan's k is the one budget).
         scene, up, unit_scale, seed: the scene arguments given (None: left out).
+        where: the ``--where`` file given (None: left out); the plan's own where file (recorded
+            in its config.json) is used, and a given one must be the same.
 
     Raises:
         UserError: one line, for a folder that is no finished plan or an option that
@@ -106,6 +112,11 @@ def start_from_plan(plan_dir: str | Path, plan_values: dict, config, *, ks_given
             continue
         raise UserError(f"{leaf.setting.flag or path} {value} conflicts with the plan's {leaf.value} "
                         f"({folder.path / 'config.json'}): leave it out, evaluate --plan uses the plan's settings")
+    planned_where = None if folder.where is None else parse_where(folder.where, f"--plan {folder.path}: config.json's where")
+    if where is not None and (planned_where is None or load_where(where).doc != planned_where.doc):
+        raise UserError(f"--where {where} is not the where file of the plan in {folder.path} "
+                        f"({'it has none' if planned_where is None else 'it has another'}): leave it out, "
+                        "evaluate --plan uses the plan's")
     if folder.existing:
         raise UserError(f"--plan {folder.path} was planned around --existing markers, which evaluate does not "
                         "draw: evaluate its placement.json with --placements instead")
@@ -129,7 +140,7 @@ def start_from_plan(plan_dir: str | Path, plan_values: dict, config, *, ks_given
     config = replace(config, seed=folder.spec.seed, study=replace(study, ks=ks, methods=methods))
     log.info("evaluate --plan %s: scene %s, %s placement of %d tags, budgets %s", folder.path, folder.scene, method,
              len(folder.markers), ",".join(map(str, ks)))
-    return PlanStart(folder, folder.spec, plan_config, config)
+    return PlanStart(folder, folder.spec, plan_config, config, planned_where)
 
 
 def adopt_plan_stages(folder: PlanFolder, plan_dir: Path, cache_dir: Path) -> list[str]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -35,6 +35,7 @@ from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity
 from markerplace.plan.types import PlanData
+from markerplace.plan.where import Where, disc_pose_weights, load_where
 from markerplace.report.plan_outputs import write_plan_outputs
 from markerplace.report.plan_report import write_plan_report
 from markerplace.runtime import run_folder
@@ -51,7 +52,7 @@ __all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan"]
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, existing: Sequence[Marker] = (),
             progress: bool = True, executor=None, k: int | None = None,
-            before_observe: Callable[[Discretization], None] | None = None) -> PlanData:
+            before_observe: Callable[[Discretization], None] | None = None, where: Where | None = None) -> PlanData:
     """Discretize, observe, count look-alikes and score (each reused from ``run_dir`` when fresh).
 
     Args:
@@ -65,6 +66,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
             candidates are fewer, before anything renders (None: not checked here).
         before_observe: called with the discretization when observe must run, before it
             renders (the run-size check of :func:`~markerplace.pipelines.size_guard.measured_size_check`).
+        where: the ``--where`` file (:mod:`markerplace.plan.where`, user frame): the returned
+            data's ``pose_weight``, computed (and a file that holds no pose refused) right after
+            discretize, before anything renders. No cached stage depends on it.
     """
     run_dir = Path(run_dir)
     run_folder.make_dirs(run_dir)
@@ -75,6 +79,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
     disc, disc_key = run_discretize(scene, config.discretize, config.placement.tag_size, run_dir, timings)
     if k is not None:
         check_k(k, len(disc.candidate_world_from_marker))
+    weights = None if where is None else disc_pose_weights(where, disc, world_offset(scene))
     marker_poses = np.concatenate([disc.candidate_world_from_marker,
                                    np.array([m.world_from_marker for m in existing]).reshape(-1, 4, 4)])
     sizes = [config.placement.tag_size] * len(disc.candidate_world_from_marker) + [m.size for m in existing]
@@ -84,8 +89,9 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
                                before=None if before_observe is None else lambda: before_observe(disc))
     n_similar = run_similarity(obs.descriptors, obs.points_world, obs_key, run_dir, config.similarity,
                                config.placement.similarity, timings, progress)
-    return score_poses(disc, obs, n_similar, marker_poses, sizes, in_view, len(existing),
+    data = score_poses(disc, obs, n_similar, marker_poses, sizes, in_view, len(existing),
                        config.placement.marker_model, config.noise, config.imaging.camera.K, timings)
+    return data if weights is None else replace(data, pose_weight=weights)
 
 
 @dataclass(frozen=True)
@@ -95,6 +101,8 @@ class PlanInputs:
     Attributes:
         existing: ``--existing`` file of tags already on the walls (user frame), or None.
         exclude: ``--exclude`` file of spots where no tag may go, or None.
+        where: ``--where`` file of the places and directions of use (:mod:`markerplace.plan.where`),
+            or None (every camera pose weighs the same).
         paper: paper of ``tags.pdf`` (``--paper``).
         force: run even when the run-size guard says it is too large (``--force``).
         adopt: use an output folder markerplace did not make (``--adopt``).
@@ -103,6 +111,7 @@ class PlanInputs:
 
     existing: str | None = None
     exclude: str | None = None
+    where: str | None = None
     paper: str = "a4"
     force: bool = False
     adopt: bool = False
@@ -135,6 +144,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     target = config.placement.target_recall  # then k is the most tags (place_for_target)
     check_tag_budget(k if target is None else 1, existing, config.placement.first_tag_id)
     exclusion = load_exclusion(inputs.exclude) if inputs.exclude else None
+    where = load_where(inputs.where) if inputs.where else None
     previous = previous_markers(out, scene_spec.spec)  # to say what this run changes
     run_folder.open_run_folder(out, "plan", adopt=inputs.adopt)
     if config.runtime.cluster:
@@ -147,7 +157,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     with make_executor(run_config.runtime) as executor:
         size_check = measured_size_check(scene, scene_spec, run_config, k, force=inputs.force)
         data = prepare(scene_spec, run_config, out, existing, inputs.progress, executor,
-                       None if target is not None else k, size_check)
+                       None if target is not None else k, size_check, where)
         if target is None:
             check_k(k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(scene_spec, data, run_config, out, executor, model_methods(config.placement),
@@ -167,7 +177,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
                                  scene=scene, existing=existing, world_offset=offset, paper=inputs.paper,
                                  scene_options={"up": scene_spec.up, "unit_scale": scene_spec.unit_scale,
                                                 "seed": scene_spec.seed}, exclusion=exclusion,
-                                 predicted=predicted)
+                                 predicted=predicted, where=where)
     log.info("placed %d markers with %s; mean score %.2f -> %.2f; 10th percentile %.2f -> %.2f",
              len(placement.markers), config.placement.method, summary["mean_score_before"],
              summary["mean_score_after"], summary["p10_score_before"], summary["p10_score_after"])

@@ -63,6 +63,8 @@ class PlanFolder:
             placement.json stores them).
         records: placement.json's marker records.
         existing: the run's ``--existing`` markers, user frame.
+        where: the run's ``--where`` file as it read it (a GeoJSON document,
+            :mod:`markerplace.plan.where`), or None.
     """
 
     path: Path
@@ -72,6 +74,7 @@ class PlanFolder:
     markers: list
     records: list
     existing: list
+    where: dict | None = None
 
     @property
     def spec(self) -> SceneSpec:
@@ -150,5 +153,8 @@ def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
         log.warning("%s was made by an older markerplace: its config.json does not record --up, --unit-scale or "
                     "--seed; assuming the defaults", path)
         options = {}
+    where = config_json.get("where")
+    if where is not None and not isinstance(where, dict):
+        raise UserError(f"{path}: config.json's where is damaged (not a JSON object): {rerun}")
     return PlanFolder(path, str(config_json["scene"]), dict(options), config, markers, list(placement["markers"]),
-                      existing)
+                      existing, where)

@@ -82,6 +82,10 @@ class PlanData:
             :func:`markerplace.testbed.calibration.calibrate_plan` (e.g. the fitted
             :class:`~markerplace.plan.score.success_model.SuccessModel` of ``expected-recall``).
         marker_model: the registered marker model the coverages were computed with.
+        pose_weight: (N,) weight >= 0 of each pose, summing to N (``plan --where``:
+            :mod:`markerplace.plan.where`), or None: every pose weighs 1. The objectives
+            (OMP's percentile, ``expected-recall``'s sum, the predicted recall and the bounds)
+            weigh each pose by it.
     """
 
     disc: Discretization
@@ -97,6 +101,7 @@ class PlanData:
     marker_sizes: np.ndarray | None = None
     calibration: dict = field(default_factory=dict)
     marker_model: str = "paper"
+    pose_weight: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -105,10 +105,12 @@ def tag_texture(ctx, tag_id: int):
     return tex
 
 
-def build_program(ctx, proj: np.ndarray, outputs: tuple[bool, bool, bool], alpha: bool = False):
+def build_program(ctx, proj: np.ndarray, outputs: tuple[bool, bool, bool], alpha: bool = False, relit: bool = False):
     """The shader program writing ``outputs`` (rgb, depth, normal), blending by alpha when
-    ``alpha``; ``proj`` is the (4, 4) float32 :func:`projection_matrix`."""
-    prog = ctx.program(vertex_shader=shaders.VERTEX, fragment_shader=shaders.fragment(*outputs, alpha=alpha))
+    ``alpha``, with the relit light model when ``relit`` (:func:`markerplace.render.shaders.fragment`);
+    ``proj`` is the (4, 4) float32 :func:`projection_matrix`."""
+    prog = ctx.program(vertex_shader=shaders.VERTEX,
+                       fragment_shader=shaders.fragment(*outputs, alpha=alpha, relit=relit))
     prog["proj"].write(proj.T.tobytes())
     if "tex" in prog:
         prog["tex"].value = 0

@@ -50,7 +50,38 @@ from markerplace.render.vertices import indexed_part_vertices, marker_vertices, 
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RenderResult", "Renderer"]
+__all__ = ["Lighting", "RenderResult", "Renderer"]
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """A light set-up other than the map's (the relit shader, :mod:`markerplace.render.shaders`):
+    colour = albedo * (ambient + headlight * cos(incidence) + sun * max(n . sun_dir, 0))
+    * (1 - dim * beyond), ``beyond`` rising 0 -> 1 across the vertical plane through
+    ``cut_point`` (world xy, metres) with horizontal normal ``cut_normal`` (unit, world xy).
+    The map's own light is ambient 0.6, headlight 0.4, no sun, no dimming.
+
+    Attributes:
+        ambient, headlight, sun: intensities (the map's total is 1.0 head-on).
+        sun_dir: (3,) unit world direction towards the light.
+        cut_point, cut_normal: the dimming plane (see above).
+        dim: share of the light lost beyond the plane, in [0, 1].
+    """
+
+    ambient: float = 0.6
+    headlight: float = 0.4
+    sun: float = 0.0
+    sun_dir: tuple = (0.0, 0.0, 1.0)
+    cut_point: tuple = (0.0, 0.0)
+    cut_normal: tuple = (1.0, 0.0)
+    dim: float = 0.0
+
+    def uniforms(self) -> dict:
+        """Uniform name -> value of the relit shader."""
+        return {"u_ambient": float(self.ambient), "u_headlight": float(self.headlight), "u_sun": float(self.sun),
+                "u_sun_dir": tuple(float(v) for v in self.sun_dir),
+                "u_cut_point": tuple(float(v) for v in self.cut_point),
+                "u_cut_normal": tuple(float(v) for v in self.cut_normal), "u_dim": float(self.dim)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +209,7 @@ class Renderer:
         self._programs: dict = {}
         self._fbos: dict = {}
         self._vaos: dict = {}
+        self._lighting: Lighting | None = None
 
         # Scene: one interleaved vertex buffer per distinct texture object (None = untextured);
         # transparent parts get a buffer each, drawn last (see the module docstring).
@@ -243,11 +275,20 @@ class Renderer:
             self._marker_draws.append(_Draw(self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
         self.markers = tuple(markers)
 
+    def set_lighting(self, lighting: Lighting | None) -> None:
+        """Light the RGB output of later renders with ``lighting`` (None: the map's light model,
+        the default)."""
+        self._lighting = lighting
+
     def _program(self, outputs: tuple[bool, bool, bool], alpha: bool = False):
-        prog = self._programs.get((outputs, alpha))
+        relit = self._lighting is not None and outputs[0]
+        prog = self._programs.get((outputs, alpha, relit))
         if prog is None:
-            prog = build_program(self.ctx, self._proj, outputs, alpha)
-            self._programs[(outputs, alpha)] = prog
+            prog = build_program(self.ctx, self._proj, outputs, alpha, relit)
+            self._programs[(outputs, alpha, relit)] = prog
+        if relit:
+            for name, value in self._lighting.uniforms().items():
+                prog[name].value = value
         return prog
 
     def _fbo(self, outputs: tuple[bool, bool, bool]):
@@ -317,7 +358,7 @@ class Renderer:
                     continue
                 if outputs[0]:
                     draw.texture.use(0)
-                vao = self._vao(kind, i, draw, prog, outputs)
+                vao = self._vao(kind, i, draw, prog, outputs + (prog.glo,))
                 for first, count in ranges:
                     vao.render(vertices=count, first=first)
         if outputs[0] and self._glass_draws:
@@ -355,7 +396,7 @@ class Renderer:
             for i in order:
                 draw = self._glass_draws[i][0]
                 draw.texture.use(0)
-                self._vao("glass", i, draw, prog, ("alpha",)).render(vertices=draw.n)
+                self._vao("glass", i, draw, prog, ("alpha", prog.glo)).render(vertices=draw.n)
         finally:
             ctx.disable(moderngl.BLEND)
 

@@ -7,6 +7,15 @@ Vertex attributes (world frame): ``in_pos`` (3f, metres), ``in_normal`` (3f), ``
 texture coordinates: t = 0 is image row 0), ``in_color`` (4 x u8 normalized, base colour x vertex
 colour). Uniforms: ``proj`` (4x4, OpenCV intrinsics -> clip, see gl_resources.projection_matrix),
 ``cam_from_world`` (4x4), ``cam_pos`` (3, world).
+
+The map's light model (:data:`AMBIENT` + :data:`HEADLIGHT`) is baked into every render; a
+*relit* fragment shader (``fragment(..., relit=True)``, the testbed's ``lighting`` query
+condition) replaces it by :data:`RELIT_UNIFORMS` set per render
+(:class:`markerplace.render.renderer.Lighting`): ambient + headlight + a directional "sun"
+(``u_sun * max(n . u_sun_dir, 0)`` on the camera-facing normal, so surfaces facing away are in
+shade) and, beyond a vertical plane through ``u_cut_point`` with horizontal normal
+``u_cut_normal`` (world xy, metres), every term dimmed by ``u_dim`` (a zone with its lights off;
+0.5 m smooth transition).
 """
 
 from __future__ import annotations
@@ -42,13 +51,26 @@ AMBIENT = 0.6
 HEADLIGHT = 0.4
 
 
-def fragment(rgb: bool, depth: bool, normal: bool, alpha: bool = False) -> str:
+#: Uniforms of the relit fragment shader: name -> GLSL type.
+RELIT_UNIFORMS = {"u_ambient": "float", "u_headlight": "float", "u_sun": "float", "u_sun_dir": "vec3",
+                  "u_cut_point": "vec2", "u_cut_normal": "vec2", "u_dim": "float"}
+
+
+def _relit_body() -> list[str]:
+    """GLSL lines of the relit light model (see the module docstring): sets ``light``."""
+    return ["vec3 p = cam_pos - v_view;",
+            "float side = smoothstep(-0.25, 0.25, dot(p.xy - u_cut_point, u_cut_normal));",
+            "float light = (u_ambient + u_headlight * c + u_sun * max(dot(n, u_sun_dir), 0.0)) * (1.0 - u_dim * side);"]
+
+
+def fragment(rgb: bool, depth: bool, normal: bool, alpha: bool = False, relit: bool = False) -> str:
     """Fragment shader writing the requested outputs to consecutive colour attachments.
 
     Attachment order: rgb (RGBA8) if requested, then depth (R32F) if requested, then the world
     normal (RGBA32F, xyz = unit normal facing the camera) if requested. With ``alpha`` the rgb
     output carries the surface's opacity (vertex colour alpha x texture alpha) for blending
-    (transparent parts); otherwise its alpha is 1.
+    (transparent parts); otherwise its alpha is 1. With ``relit`` the rgb output uses the relit
+    light model (:data:`RELIT_UNIFORMS`) instead of the map's.
     """
     outs, body, loc = [], [], 0
     need_n = rgb or normal
@@ -60,7 +82,11 @@ def fragment(rgb: bool, depth: bool, normal: bool, alpha: bool = False) -> str:
     if rgb:
         outs.append(f"layout(location = {loc}) out vec4 out_rgb;")
         body.append("vec4 albedo = v_color * texture(tex, v_uv);")
-        body.append(f"out_rgb = vec4(albedo.rgb * ({AMBIENT} + {HEADLIGHT} * c), {'albedo.a' if alpha else '1.0'});")
+        if relit:
+            body.extend(_relit_body())
+            body.append(f"out_rgb = vec4(albedo.rgb * light, {'albedo.a' if alpha else '1.0'});")
+        else:
+            body.append(f"out_rgb = vec4(albedo.rgb * ({AMBIENT} + {HEADLIGHT} * c), {'albedo.a' if alpha else '1.0'});")
         loc += 1
     if depth:
         outs.append(f"layout(location = {loc}) out float out_depth;")
@@ -74,6 +100,8 @@ def fragment(rgb: bool, depth: bool, normal: bool, alpha: bool = False) -> str:
         [
             "#version 330",
             "uniform sampler2D tex;",
+            *([f"uniform {t} {n};" for n, t in RELIT_UNIFORMS.items()] + ["uniform vec3 cam_pos;"]
+              if relit and rgb else []),
             "in vec3 v_normal;",
             "in vec3 v_view;",
             "in vec2 v_uv;",

@@ -11,6 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
+from markerplace.runtime import run_folder
 from markerplace.runtime.cache import config_dict
 from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
 from markerplace.plan.score.localizability import entropy
@@ -91,7 +92,8 @@ def write_placement(out_dir: Path, records: Sequence[dict], scene_source: str, m
 
 def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.ndarray, config, method: str,
                        scene_source: str, scene, existing: Sequence = (), world_offset=None, paper: str = "a4",
-                       scene_options: dict | None = None, exclusion=None, predicted: dict | None = None) -> dict:
+                       scene_options: dict | None = None, exclusion=None, predicted: dict | None = None,
+                       where=None) -> dict:
     """Write every output of a plan run and return a summary dict (also in placement.json).
 
     ``scene`` (internal frame) is measured for the installer's instructions (each marker's
@@ -103,7 +105,10 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
     :class:`~markerplace.plan.discretize.exclusion.Exclusion`, user frame) goes there too.
     ``predicted`` (``predicted_recall`` and ``score_bound``,
-    :mod:`markerplace.plan.place.predicted`) goes into placement.json as it is.
+    :mod:`markerplace.plan.place.predicted`) goes into placement.json as it is. ``where``
+    (``--where``, :class:`~markerplace.plan.where.Where`) goes into config.json as read; with
+    ``data.pose_weight`` the summary gets a ``where`` object (weighted mean scores, the poses
+    that weigh) and ``where.png`` maps the mean weight per location.
 
     ``data``, ``placement`` and ``existing`` are in the scene's internal frame; every position
     written is moved into the user's frame by ``world_offset`` ((3,) metres, see
@@ -135,6 +140,11 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
         "planned_storeys": [int(s) for s in disc.planned_storeys],
         "discretization": disc.summary,
     }
+    w = data.pose_weight
+    if w is not None:
+        summary["where"] = {"weighted_poses": int(np.count_nonzero(w > 0)),
+                            "mean_score_before": float(np.sum(w * data.base_score) / np.sum(w)),
+                            "mean_score_after": float(np.sum(w * score_after) / np.sum(w))}
     records = placement_records(placement, method, disc)
     for r, inst in zip(records, install):
         r["install"] = install_to_frame(inst, world_offset)
@@ -145,10 +155,12 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
-              first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains)
+              first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains,
+              **({} if w is None else {"pose_weight": w}))
     write_json(out_dir / "config.json", {"scene": scene_source, **config_dict(config), "scene_options": scene_options or {},
                                          "existing_markers": [m.to_json() for m in existing],
-                                         "exclude": None if exclusion is None else exclusion.to_json()})
+                                         "exclude": None if exclusion is None else exclusion.to_json(),
+                                         **({} if where is None else {"where": where.doc})})
 
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
     eye = disc.storeys[disc.planned_storeys] + config.discretize.height
@@ -171,6 +183,12 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
                   title="Information gain of the first marker (dark = high)", colorbar_label="mean gain (nats)",
                   markers_xy=first.position[None, :2], markers_normal=first.normal[None, :2], marker_labels=["1"],
                   marker_panel=panel(first.position[2]))
+    if w is None:
+        run_folder.remove(out_dir / "where.png")  # a previous run's, with --where
+    else:
+        floor_map(out_dir / "where.png", **grid, values=per_location_mean(w, disc.location_index, L), cmap="gray_r",
+                  title="Where the cameras will be (--where): pose weight (dark = high)",
+                  colorbar_label="mean weight over yaws (1 = average pose)")
     markers = list(placement.markers) + list(existing)
     pos = np.array([m.position for m in markers]).reshape(-1, 3)
     nrm = np.array([m.normal[:2] for m in markers]).reshape(-1, 2)

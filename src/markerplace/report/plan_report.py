@@ -98,6 +98,10 @@ def _scores_section(s: dict) -> str:
     rows = [["mean", s["mean_score_before"], s["mean_score_after"], s["mean_score_after"] - s["mean_score_before"]],
             ["10th percentile", s["p10_score_before"], s["p10_score_after"],
              s["p10_score_after"] - s["p10_score_before"]]]
+    if "where" in s:  # plan --where: the objective's weighted mean
+        w = s["where"]
+        rows.append(["weighted mean (--where)", w["mean_score_before"], w["mean_score_after"],
+                     w["mean_score_after"] - w["mean_score_before"]])
     return ("<h2>Scores before and after</h2><p class=\"note\">Localizability score of a camera pose: the negative "
             "entropy of its pose posterior (nats; higher is better), over every feasible pose. The 10th "
             "percentile is what the worst-served places get.</p>"
@@ -108,7 +112,9 @@ def _maps_section(out_dir: Path) -> str:
     figs = [("placement.png", "The plan: numbered tags (arrows point where each tag faces) over the scores "
              "after placement; one panel per storey."),
             ("scores.png", "Scores without markers (dark = low); blue ticks are candidate spots."),
-            ("gain_first.png", "Information gain of the first tag (dark = high).")]
+            ("gain_first.png", "Information gain of the first tag (dark = high)."),
+            ("where.png", "Where the cameras will be (--where): the weight of each camera location in the "
+                          "objective and the predicted recall (dark = high, mean over yaws).")]
     parts = [img(png_file_uri(out_dir / name), name, text) for name, text in figs if (out_dir / name).is_file()]
     return "<h2>Maps</h2>" + "".join(parts)
 

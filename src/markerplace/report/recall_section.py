@@ -79,7 +79,8 @@ def recall_section(doc: dict) -> str:
         rec, kn, ub = pr["recall"], pr.get("knee"), pr["upper_bound"]
         t = pr.get("target")
         m = pr["model"]
-        out.append("<p>Predicted recall: the share of the feasible camera poses predicted to localize, "
+        weighted = " (weighted by --where: where the cameras will be)" if "where" in doc.get("summary", {}) else ""
+        out.append(f"<p>Predicted recall: the share of the feasible camera poses{weighted} predicted to localize, "
                    f"P(success) = sigmoid({m['intercept']:.3f} + {m['slope']:.3f} s) of each pose's score s under "
                    f"the {esc(pr['marker_model'])} marker model, fitted on {m['n']} map-image localizations "
                    "(never test images), after the first 1, 2, ... tags of this plan.</p>")

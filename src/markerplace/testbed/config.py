@@ -9,9 +9,10 @@ from dataclasses import dataclass, field
 
 from markerplace.errors import UserError
 from markerplace.settings import SEED_MAX, setting
+from markerplace.testbed.conditions import CLEAN, CONDITIONS
 from markerplace.testbed.metrics import THRESHOLDS
 from markerplace.testbed.marker_sets import NO_MARKERS, method_names
-from markerplace.testbed.poses import TEST_SETS
+from markerplace.testbed.poses import ALL_TEST_SETS, TEST_SETS, WHERE_SET
 from dataclasses import fields
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.plan.place.methods import PLACEMENT_METHODS
@@ -49,9 +50,12 @@ class TestSetConfig:
 
     Attributes:
         tests: test images per test set (paper: 200 room ... 10000 apartment).
-        sets: ``weighted`` (towards low scores) and/or ``uniform``.
+        sets: ``weighted`` (towards low scores), ``uniform`` and, with ``--where``, ``where``.
         seed: seed of the test poses and the shift signs alone; None = the run's ``seed``.
         min_clearance: test cameras need this clearance (metres) from non-free cells.
+        conditions: query conditions (:mod:`markerplace.testbed.conditions`): every test set
+            is localized under each (``clean``: as the map is rendered, the default, every
+            result before conditions existed); the map stays clean.
     """
 
     __test__ = False
@@ -59,14 +63,24 @@ class TestSetConfig:
     tests: int = setting(200, flag="--tests", commands=("evaluate",), bounds=(1, 100_000), metavar="N", help="test images per test set",
                          hint="test images per test set, e.g. 200")
     sets: tuple[str, ...] = setting(TEST_SETS, flag="--test-sets", commands=("evaluate",), convert=_name_list,
-                                    help="comma list of weighted (towards low scores) and uniform",
+                                    help="comma list of weighted (towards low scores), uniform and, with --where, "
+                                         "where (drawn from the where file's pose weights)",
                                     doc="`weighted` draws test poses with the paper's weights w = 2 l* - mean(l) - l "
-                                        "(more where scores are low); `uniform` draws uniformly")
+                                        "(more where scores are low); `uniform` draws uniformly; `where` (only with "
+                                        "`--where FILE` or a `--plan` made with one) draws them in proportion to "
+                                        "the file's pose weights ([where.md](where.md))")
     seed: int | None = setting(None, flag="--test-seed", commands=("evaluate", "study"), bounds=(0, SEED_MAX), metavar="N", shown_default="--seed",
                                hint=f"a seed in 0..{SEED_MAX}, e.g. 3",
                                help="seed of the test poses (and --shift signs) alone; default: --seed. Draws a new "
                                     "test set without changing a built-in scene")
     min_clearance: float = 0.1
+    conditions: tuple[str, ...] = setting((CLEAN,), flag="--conditions", commands=("evaluate",), convert=_name_list,
+                                          help=lambda: "comma list of query conditions, the test images taken as a "
+                                          "phone would (the map stays clean): " + CONDITIONS.help(),
+                                          doc="comma list of query conditions; each test set is localized under "
+                                              "each, reported per condition (docs/design.md, *Query conditions*): "
+                                              "`clean` (as the map), `exposure`, `white_balance`, `lighting`, "
+                                              "`noise`, `blur`, `occluders`")
 
 
 @dataclass(frozen=True)
@@ -206,13 +220,22 @@ class EvaluateConfig:
 
 
 
-def validate_evaluate_config(config: EvaluateConfig) -> None:
-    """Raise :class:`UserError` (one line) for settings that cannot work."""
+def validate_evaluate_config(config: EvaluateConfig, where: bool = False) -> None:
+    """Raise :class:`UserError` (one line) for settings that cannot work; ``where``: a where
+    file is given (``--where`` or the ``--plan``'s), so the ``where`` test set is valid."""
     sets, methods = config.test.sets, config.study.methods
-    if not sets or any(t not in TEST_SETS for t in sets):
-        raise UserError(f"--test-sets {','.join(sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)}")
+    if not sets or any(t not in ALL_TEST_SETS for t in sets):
+        raise UserError(f"--test-sets {','.join(sets)!r} is not valid: use a comma list of {', '.join(TEST_SETS)} "
+                        f"(and {WHERE_SET} with --where FILE)")
+    if WHERE_SET in sets and not where:
+        raise UserError(f"--test-sets {WHERE_SET} draws test images from the places of use: give --where FILE (or "
+                        "--plan of a plan made with --where)")
     if any(m not in method_names() for m in methods):
         raise UserError(f"--methods {','.join(methods)!r} is not valid: use a comma list of {', '.join(method_names())}")
+    conds = config.test.conditions
+    if not conds or any(c not in CONDITIONS for c in conds) or len(set(conds)) != len(conds):
+        raise UserError(f"--conditions {','.join(conds)!r} is not valid: use a comma list of distinct "
+                        f"{', '.join(CONDITIONS.names())}")
     LOCALIZERS.lookup(config.localization.localizer)
     diag = config.diagnostics
     if (diag.ceiling or diag.calibration) and NO_MARKERS not in methods:

@@ -25,6 +25,7 @@ from markerplace.runtime.atomic_io import write_npy
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache, run_folder
+from markerplace.testbed.conditions import QueryCondition, render_query
 
 log = logging.getLogger(__name__)
 
@@ -32,10 +33,12 @@ __all__ = ["TestbedImaging", "BaseImages"]
 
 
 def _render_task(engine: ImagingEngine, item) -> ImageFeatures:
-    """(world_from_cam, markers, map_only) -> features of the render with those markers; a
-    marker-free render also carries ``extras['in_view']``, the (U,) union-marker in-view mask."""
-    world_from_cam, markers, map_only = item
-    res = engine.render(world_from_cam, markers)
+    """(world_from_cam, markers, map_only[, image condition]) -> features of the render with
+    those markers, degraded by the query condition when one is given
+    (:func:`~markerplace.testbed.conditions.render_query`); a marker-free render also carries
+    ``extras['in_view']``, the (U,) union-marker in-view mask (of the clean depth)."""
+    world_from_cam, markers, map_only = item[:3]
+    res = render_query(engine, world_from_cam, markers, item[3] if len(item) > 3 else None)
     feats = engine.features(res, tags=True)
     if map_only:
         feats = feats.with_3d_only()
@@ -92,18 +95,20 @@ class TestbedImaging:
                 yield i, r
 
     def render_iter(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
-                    map_only: bool, desc: str) -> Iterator[tuple[int, ImageFeatures]]:
+                    map_only: bool, desc: str,
+                    condition: QueryCondition | None = None) -> Iterator[tuple[int, ImageFeatures]]:
         """``(i, features)`` of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with
-        ``markers``, as the executor finishes them (in any order)."""
+        ``markers`` (under the query ``condition``, None: clean), as the executor finishes them
+        (in any order)."""
         indices = [int(i) for i in indices]
-        items = [(world_from_cam[i], list(markers), map_only) for i in indices]
+        items = [_item(world_from_cam[i], list(markers), map_only, condition, i) for i in indices]
         for j, f in self.run(_render_task, items, desc):
             yield indices[j], f
 
     def render(self, world_from_cam: np.ndarray, indices: Sequence[int], markers: Sequence[Marker],
-               map_only: bool, desc: str) -> dict[int, ImageFeatures]:
+               map_only: bool, desc: str, condition: QueryCondition | None = None) -> dict[int, ImageFeatures]:
         """Features of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with ``markers``."""
-        return dict(self.render_iter(world_from_cam, indices, markers, map_only, desc))
+        return dict(self.render_iter(world_from_cam, indices, markers, map_only, desc, condition))
 
     def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple]:
         """Per image: the ``markers`` in view as sorted (union index, tag id) pairs, from the
@@ -121,6 +126,13 @@ class TestbedImaging:
         return tuple(sorted((tag_id,) + _geometry_key(self.union[u]) for u, tag_id in key))
 
 
+def _item(world_from_cam: np.ndarray, markers: list, map_only: bool, condition: QueryCondition | None,
+          index: int) -> tuple:
+    """A :func:`_render_task` item of image ``index`` (clean: no fourth element)."""
+    base = (world_from_cam, markers, map_only)
+    return base if condition is None else base + (condition.image(index),)
+
+
 PART_SIZE = 64
 """Images per part file of a marker-free stage: an interrupted stage loses at most this many."""
 
@@ -136,14 +148,18 @@ class BaseImages:
     ``in_view_parts/parts/``), so an interrupted stage loses at most one part and the next run
     renders only the images no part holds. The assembled result does not depend on where a run
     stopped (images are put back in index order).
+
+    ``condition``: the query condition its images are rendered under (None: clean; the map
+    images are always clean); part of ``key``.
     """
 
     def __init__(self, imaging: TestbedImaging, world_from_cam: np.ndarray, folder: Path, key: str, map_only: bool,
-                 name: str, part_size: int = PART_SIZE):
+                 name: str, part_size: int = PART_SIZE, condition: QueryCondition | None = None):
         self.folder = Path(folder)
         self.world_from_cam = np.asarray(world_from_cam, float)
         self.part_size = int(part_size)
         N = len(world_from_cam)
+        self.condition = condition
         feat_key = cache.hash_of("base-features-v2", key, map_only, imaging.config)
         mask_key = cache.hash_of(feat_key, imaging.samples, imaging.config.visibility_margin_px,
                                  imaging.config.occlusion_tolerance)
@@ -155,7 +171,7 @@ class BaseImages:
         else:
             writer = FeatureWriter(feat_dir, N, feat_key + mask_key, self.part_size)
             todo = _resume(writer, N, f"{name} (no markers)")
-            items = [(self.world_from_cam[i], [], map_only) for i in todo]
+            items = [_item(self.world_from_cam[i], [], map_only, condition, i) for i in todo]
             for j, f in imaging.run(_render_task, items, f"{name} (no markers)", initial=N - len(todo)):
                 writer.add(todo[j], f)
             feats = writer.finish()

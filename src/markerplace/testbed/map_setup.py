@@ -11,12 +11,14 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from markerplace.imaging.config import SIFT_DEFAULT
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
+from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
 from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.predict import ImageSet, PredictContext
 from markerplace.localization.vlad import VladCodebook
@@ -64,25 +66,38 @@ def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages,
 
 def marker_free_images(tb: TestbedImaging, map_poses: np.ndarray, test_poses: dict, cache_dir: Path, base_key: str,
                        imaging, localization, seed: int, timings: dict,
-                       reuse: bool = True) -> tuple[PredictContext, dict]:
+                       reuse: bool = True, conditions: Sequence[str] = (CLEAN,),
+                       condition_seed: int = 0) -> tuple[PredictContext, dict]:
     """The marker-free side of one evaluation: map features, the VLAD codebook and the query
-    features of every test set (each cached in ``cache_dir``).
+    features of every test set under every query condition (each cached in ``cache_dir``).
 
     ``reuse``: predictions reuse the marker-free result where a placement cannot change it.
+    ``conditions``: query conditions (:mod:`markerplace.testbed.conditions`); each (test set,
+    condition) is an image set named :func:`~markerplace.testbed.conditions.set_name` (the
+    clean one: the test set's name, key and folder as before conditions existed), seeded by
+    ``condition_seed`` (the test seed). The map is always clean.
 
     Returns:
         (the :class:`~markerplace.testbed.predict.PredictContext` every prediction shares,
-        test set name -> :class:`~markerplace.testbed.predict.ImageSet`).
+        image set name -> :class:`~markerplace.testbed.predict.ImageSet`, test sets in order,
+        conditions in order within each).
     """
     t0 = time.perf_counter()
     map_base = map_images(tb, map_poses, cache_dir, base_key)
     timings["map_no_markers"] = time.perf_counter() - t0
     codebook, cb_key = vlad_codebook(cache_dir, base_key, imaging, map_base, localization.vlad_clusters, seed, timings)
     t0 = time.perf_counter()
-    sets = {ts: ImageSet(ts, tp.world_from_cam, BaseImages(tb, tp.world_from_cam, cache_dir / f"query_base_{ts}",
-                                                          cache.hash_of(base_key, tp.world_from_cam), False,
-                                                          f"queries {ts}"))
-            for ts, tp in test_poses.items()}
+    sets = {}
+    for ts, tp in test_poses.items():
+        for c in conditions:
+            cond = None if c == CLEAN else QueryCondition(c, ts, condition_seed)
+            key = cache.hash_of(base_key, tp.world_from_cam) if cond is None else \
+                cache.hash_of(base_key, tp.world_from_cam, cond.key())
+            name = set_name(ts, c)
+            folder = cache_dir / (f"query_base_{ts}" if cond is None else f"query_base_{ts}_{c}")
+            sets[name] = ImageSet(name, tp.world_from_cam, BaseImages(tb, tp.world_from_cam, folder, key, False,
+                                                                      f"queries {name}", condition=cond),
+                                  condition=cond)
     timings["queries_no_markers"] = time.perf_counter() - t0
     ctx = PredictContext(tb, map_base, codebook, cb_key, localizer_spec(localization, seed), imaging, cache_dir, timings,
                          reuse)

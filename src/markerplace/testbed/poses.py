@@ -5,7 +5,8 @@ either ``uniform`` or ``weighted`` towards low localizability scores with the pa
 
     w(c) = 2 l* - mean(l) - l(c)      (l = score without markers, l* = max l)
 
-and then perturbed: x, y += U(-0.5, 0.5) * grid_spacing, yaw += U(-0.5, 0.5) * 45 deg (height,
+or ``where`` proportionally to the ``--where`` pose weights (:mod:`markerplace.plan.where`: the
+places and directions of use the plan was weighted by), and then perturbed: x, y += U(-0.5, 0.5) * grid_spacing, yaw += U(-0.5, 0.5) * 45 deg (height,
 pitch and roll unchanged). A perturbed pose is kept only where the camera is in free space of
 its own storey (occupancy cell free and clearance above ``min_clearance``); rejected draws are
 redrawn. All randomness comes from ``numpy.random.default_rng(seed)``: the same seed gives the
@@ -27,6 +28,13 @@ from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime.stages import cached
 
 TEST_SETS = ("weighted", "uniform")
+"""The test sets of every evaluation (the default of ``--test-sets``)."""
+
+WHERE_SET = "where"
+"""The test set drawn from the ``--where`` pose weights; valid only with a where file."""
+
+ALL_TEST_SETS = TEST_SETS + (WHERE_SET,)
+"""Every test set name, in the order that seeds them (``seed + 1000 * index``)."""
 
 
 
@@ -36,7 +44,8 @@ class TestPoseConfig:
 
     Attributes:
         num: number of test poses N (paper: 200 for the room, 2000 for the office).
-        mode: ``weighted`` (towards low scores, the paper's default) or ``uniform``.
+        mode: ``weighted`` (towards low scores, the paper's default), ``uniform`` or ``where``
+            (proportional to the pose weights of ``plan --where``).
         xy_jitter: x and y are perturbed by U(-0.5, 0.5) * xy_jitter * grid_spacing.
         yaw_jitter_deg: yaw is perturbed by U(-0.5, 0.5) * yaw_jitter_deg degrees (paper: 45).
         min_clearance: a perturbed camera must be at least this far (metres) from any non-free
@@ -110,10 +119,16 @@ def test_pose_weights(scores: np.ndarray) -> np.ndarray:
 test_pose_weights.__test__ = False  # type: ignore[attr-defined]
 
 
-def sampling_probabilities(scores: np.ndarray, mode: str) -> np.ndarray:
-    """(N,) probabilities of drawing each feasible pose for ``mode`` in :data:`TEST_SETS`."""
-    if mode not in TEST_SETS:
-        raise UserError(f"test set {mode!r} is not known: use one of {', '.join(TEST_SETS)}")
+def sampling_probabilities(scores: np.ndarray, mode: str, weights: np.ndarray | None = None) -> np.ndarray:
+    """(N,) probabilities of drawing each feasible pose for ``mode`` in :data:`ALL_TEST_SETS`
+    (``where``: proportional to the (N,) pose ``weights``, which it needs)."""
+    if mode not in ALL_TEST_SETS:
+        raise UserError(f"test set {mode!r} is not known: use one of {', '.join(ALL_TEST_SETS)}")
+    if mode == WHERE_SET:
+        if weights is None or not np.sum(weights) > 0:
+            raise UserError("test set 'where' needs --where FILE (the places and directions of use)")
+        w = np.asarray(weights, dtype=float)
+        return w / w.sum()
     n = len(scores)
     if mode == "uniform":
         return np.full(n, 1.0 / n)
@@ -176,7 +191,8 @@ def free_space_of(disc, min_clearance: float) -> Callable[..., np.ndarray]:
 
 
 def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spacing: float,
-                      config: TestPoseConfig, is_free: Callable[[np.ndarray], np.ndarray]) -> TestPoses:
+                      config: TestPoseConfig, is_free: Callable[[np.ndarray], np.ndarray],
+                      weights: np.ndarray | None = None) -> TestPoses:
     """Draw ``config.num`` perturbed test poses from the feasible poses.
 
     Args:
@@ -185,6 +201,7 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
         grid_spacing: camera grid spacing, metres (scale of the xy perturbation).
         config: number, mode, perturbation and seed.
         is_free: ``(xy (M, 2), source_index (M,)) -> (M,) bool``, e.g. from :func:`free_space_checker`.
+        weights: (N,) pose weights of ``--where`` (used by ``where``), or None.
 
     Returns:
         :class:`TestPoses` with exactly ``config.num`` poses, in draw order.
@@ -194,7 +211,7 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
     world_from_cam = np.asarray(world_from_cam, dtype=float)
     if len(world_from_cam) == 0:
         raise UserError("no feasible camera poses to draw test poses from: check --height and --grid-spacing")
-    probs = sampling_probabilities(np.asarray(scores, dtype=float), config.mode)
+    probs = sampling_probabilities(np.asarray(scores, dtype=float), config.mode, weights)
     rng = np.random.default_rng(config.seed if config.stream == 0 else [config.seed, config.stream])
     yaws = np.arctan2(world_from_cam[:, 1, 2], world_from_cam[:, 0, 2])
     kept_idx, kept_dxy, kept_dyaw = [], [], []
@@ -227,16 +244,19 @@ def sample_test_poses(world_from_cam: np.ndarray, scores: np.ndarray, grid_spaci
 def cached_test_poses(out: Path, config, plan_config, data, base_key: str, timings: dict) -> dict:
     """The test poses of every test set of an evaluation, ``out/test_poses_<set>.npz``, reused
     while the map, the scores and the settings are unchanged. A set's seed does not depend on
-    which other sets run. Returns test set name -> :class:`TestPoses`."""
+    which other sets run. The ``where`` set's key holds the pose weights (``data.pose_weight``, from
+    the ``--where`` file), so another file draws other poses. Returns test set name -> :class:`TestPoses`."""
     map_poses = np.asarray(data.disc.world_from_cam, float)
     is_free = free_space_of(data.disc, config.test.min_clearance)
     poses = {}
     for ts in config.test.sets:
-        tcfg = TestPoseConfig(num=config.test.tests, mode=ts, seed=config.pose_seed + 1000 * TEST_SETS.index(ts),
+        tcfg = TestPoseConfig(num=config.test.tests, mode=ts, seed=config.pose_seed + 1000 * ALL_TEST_SETS.index(ts),
                               min_clearance=config.test.min_clearance)
-        key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing)
+        weights = data.pose_weight if ts == WHERE_SET else None
+        key = cache.hash_of("test-poses-v1", base_key, data.base_score, tcfg, plan_config.discretize.grid_spacing,
+                            *(() if weights is None else (np.asarray(weights, float),)))
         poses[ts] = cached("test_poses", out / f"test_poses_{ts}.npz", key,
                            lambda: sample_test_poses(map_poses, data.base_score, plan_config.discretize.grid_spacing,
-                                                     tcfg, is_free),
+                                                     tcfg, is_free, weights),
                            lambda tp, path: tp.save(path), TestPoses.load, timings)
     return poses

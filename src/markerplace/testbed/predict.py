@@ -27,6 +27,7 @@ import numpy as np
 from markerplace.imaging.features import ImageFeatures
 from markerplace.tagfamily import DRAWING_VERSION
 from markerplace.runtime import cache, run_folder
+from markerplace.testbed.conditions import QueryCondition
 from markerplace.testbed.images import BaseImages, TestbedImaging
 from markerplace.testbed.maps import localize_task, save_map
 from markerplace.testbed.marker_sets import NO_MARKERS
@@ -48,6 +49,8 @@ class ImageSet:
         exclude: per image, map image indices left out of its retrieval (None: none); the map
             images leave out their own location.
         own: the images are the map's own (re-rendered ones come from the placement's map).
+        condition: the query condition its images are rendered under (None: clean), as
+            ``base``'s; the images re-rendered with a placement's markers get it too.
     """
 
     name: str
@@ -55,6 +58,7 @@ class ImageSet:
     base: BaseImages
     exclude: list | None = None
     own: bool = False
+    condition: QueryCondition | None = None
 
 __all__ = ["ImageSet", "Retrieval", "RenderedFeatures", "PlacementMap", "PlacementMaps", "localize_set",
            "PredictionKey", "PredictContext", "predict_placements"]
@@ -129,12 +133,13 @@ class RenderedFeatures:
     Args:
         store: the folder's render store (None: keep nothing on disk).
         set_key: the image set's features key (:attr:`BaseImages.key`); names its images in
-            the store.
+            the store (and holds the set's query condition).
+        condition: the query condition the set's images are rendered under (None: clean).
     """
 
-    def __init__(self, store: RenderStore | None = None, set_key: str = ""):
+    def __init__(self, store: RenderStore | None = None, set_key: str = "", condition: QueryCondition | None = None):
         self._features: dict[tuple, ImageFeatures] = {}
-        self.store, self.set_key = store, set_key
+        self.store, self.set_key, self.condition = store, set_key, condition
 
     def _store_key(self, tb: TestbedImaging, i: int, key: tuple) -> str:
         return cache.hash_of("render-v1", DRAWING_VERSION, self.set_key, i, tb.appearance(key))
@@ -156,7 +161,7 @@ class RenderedFeatures:
                 log.debug("%s: %d of %d renders from the store", desc, len(got), len(need))
             need = [i for i in need if names[i] not in got]
         if need:
-            for i, f in tb.render_iter(world_from_cam, need, markers, map_only, desc):
+            for i, f in tb.render_iter(world_from_cam, need, markers, map_only, desc, self.condition):
                 self._features[(i, keys[i])] = f
                 if self.store is not None:
                     self.store.put(names[i], f)
@@ -344,7 +349,7 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
         retrieval = Retrieval(codebook, map_base, conf.num_candidates)
     store = RenderStore(cache_dir / "renders") if ctx.keep_renders else None
     maps = PlacementMaps(tb, map_base, codebook, retrieval, store)
-    rendered = {s.name: RenderedFeatures(store, s.base.key) for s in sets.values()}
+    rendered = {s.name: RenderedFeatures(store, s.base.key, s.condition) for s in sets.values()}
     reused = 0
     for p in placements:
         marker_arr = [(m.tag_id, m.size, np.asarray(m.world_from_marker)) for m in p.markers]

@@ -7,7 +7,8 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.plan.score.localizability import information_gain
-from markerplace.plan.place.greedy import GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy, percentile_with_zeros, q_from_v
+from markerplace.plan.place.greedy import (GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy,
+                                          percentile_with_zeros, q_from_v, weighted_q_from_v)
 from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 
@@ -195,3 +196,91 @@ def test_uniform_placement_spread() -> None:
     picks = uniform_placement(s2, 100.0, 4, seed=0)
     assert len(set(picks)) == 4
     assert sorted(uniform_placement(s2, 100.0, 5, seed=3)) == [0, 1, 2, 3, 4]
+
+
+# --------------------------------------------------------------------------------------------
+# Pose weights (plan --where)
+# --------------------------------------------------------------------------------------------
+
+
+def weighted_percentile_reference(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """The smallest value whose cumulative weight (values sorted ascending) reaches q/100 of the total."""
+    order = np.argsort(values, kind="stable")
+    cum = np.cumsum(weights[order])
+    i = int(np.argmax(cum >= q / 100.0 * weights.sum()))
+    return float(values[order][i])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_weighted_gains_match_a_dense_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    N, C = int(rng.integers(20, 120)), int(rng.integers(3, 20))
+    base, covs = random_problem(rng, N, C, max_cov=N)
+    w = rng.uniform(0, 3, N) * (rng.uniform(size=N) < 0.6)
+    w *= N / w.sum()
+    q = float(rng.uniform(5, 95))
+    prob = GreedyProblem(base.copy(), covs, q, w)
+    qg, mg = prob.evaluate(np.arange(C))
+    for m, cov in enumerate(covs):
+        dense = np.zeros(N)
+        if len(cov):
+            dense[cov.pose_idx] = information_gain(base[cov.pose_idx], cov.info)
+        assert qg[m] == pytest.approx(weighted_percentile_reference(dense, w, q), rel=1e-9, abs=1e-12)
+        assert mg[m] == pytest.approx(np.sum(w * dense) / N, rel=1e-9, abs=1e-12)
+    np.testing.assert_allclose(coverage_percentages(covs, N, w),
+                               [100 * w[c.pose_idx].sum() / w.sum() for c in covs])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_weighted_lazy_equals_plain_and_unit_weights_change_nothing(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    N, C = int(rng.integers(30, 200)), int(rng.integers(5, 40))
+    base, covs = random_problem(rng, N, C, max_cov=N // 2)
+    k = int(rng.integers(1, C + 1))
+    w = rng.uniform(0, 2, N) * (rng.uniform(size=N) < 0.5)
+    w *= N / w.sum()
+    plain = omp_greedy(base, covs, k, lazy=False, weights=w)
+    lazy = omp_greedy(base, covs, k, lazy=True, weights=w)
+    assert lazy.order == plain.order and lazy.gains == plain.gains
+    unweighted, ones = omp_greedy(base, covs, k), omp_greedy(base, covs, k, weights=np.ones(N))
+    assert ones.order == unweighted.order
+    np.testing.assert_allclose(ones.gains, unweighted.gains, rtol=1e-12)
+
+
+def test_weights_pull_the_pick_to_where_the_cameras_are() -> None:
+    """Two equal tags, one seen by poses 0..9, the other by 10..19: unweighted, the tie goes to
+    the lower index; with weight only on 10..19, the second tag wins and the first gains 0."""
+    N = 20
+    base = np.repeat((100.0 * np.eye(6))[None], N, axis=0)
+    covs = [MarkerCoverage(np.arange(10), np.repeat((1e3 * np.eye(6))[None], 10, axis=0)),
+            MarkerCoverage(np.arange(10, 20), np.repeat((1e3 * np.eye(6))[None], 10, axis=0))]
+    assert omp_greedy(base, covs, 1, v=100).order == [0]
+    w = np.r_[np.zeros(10), np.full(10, 2.0)]
+    res = omp_greedy(base, covs, 2, v=100, weights=w)
+    assert res.order == [1, 0] and res.gains[0] > 0 and res.gains[1] == 0.0
+
+
+def test_weighted_gain_does_not_depend_on_the_batch_and_q_is_taken_over_seen_candidates() -> None:
+    """Lazy greedy evaluates a candidate alone: its weighted gain must be the one it gets in a
+    batch, bit for bit (q = 100 included, where rounding could miss the threshold); and the
+    q-from-v rule runs over the candidates some weighted pose sees."""
+    rng = np.random.default_rng(7)
+    N, C = 90, 25
+    base, covs = random_problem(rng, N, C, max_cov=60)
+    w = np.where(rng.uniform(size=N) < 0.3, 10.0 / 3.0, 0.0)
+    w *= N / w.sum()
+    for q in (100.0, 97.3, 50.0):
+        prob = GreedyProblem(base.copy(), covs, q, w)
+        together = prob.evaluate(np.arange(C))[0]
+        alone = np.array([prob.evaluate(np.array([m]))[0][0] for m in range(C)])
+        np.testing.assert_array_equal(together, alone)
+        if q == 100.0:  # the largest gain over the weighted poses
+            for m, cov in enumerate(covs):
+                g = information_gain(base[cov.pose_idx], cov.info) if len(cov) else np.zeros(0)
+                assert together[m] == pytest.approx(max(g[w[cov.pose_idx] > 0], default=0.0), rel=1e-12)
+    P = np.array([0.0, 0.0, 5.0, 10.0, 20.0, 40.0])
+    q, eligible = weighted_q_from_v(P, 75.0, True)
+    q_seen, el_seen = q_from_v(P[2:], 75.0)
+    assert q == q_seen and eligible.tolist() == [False, False, *el_seen.tolist()]
+    assert weighted_q_from_v(P, 75.0, False)[0] == q_from_v(P, 75.0)[0]
+    assert weighted_q_from_v(np.zeros(3), 90.0, True) == (100.0, pytest.approx(np.zeros(3, bool)))

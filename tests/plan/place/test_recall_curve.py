@@ -209,3 +209,25 @@ def test_settings_target_recall_and_recall_curve(tmp_path):
     assert plan_config_from_args(parse(["plan", "room", "--out", "x", "--config", str(toml)])).placement.k == 9
     toml.write_text("[placement]\nv = 80.0\n")
     assert plan_config_from_args(parse(["plan", "room", "--out", "x", "--config", str(toml)])).placement.k == 20
+
+
+def test_weighted_curve_bounds_and_expected_recall() -> None:
+    """Pose weights (plan --where): an indicator weight scaled to sum to N gives the curve, the
+    bounds and the expected-recall objective of the weighted poses alone."""
+    base, covs = _problem(seed=3, N=40, C=10)
+    model = SuccessModel(-0.5 * float(np.median(-entropy(base))), 0.5, 100, 50, 0.8, 0.0)
+    keep = np.arange(40) % 3 == 0
+    w = keep * (40 / keep.sum())
+    order = [2, 5, 7]
+    sub = [MarkerCoverage(np.searchsorted(np.flatnonzero(keep), c.pose_idx[keep[c.pose_idx]]),
+                          c.info[keep[c.pose_idx]]) for c in covs]
+    np.testing.assert_allclose(recall_curve(base, covs, order, model, weights=w),
+                               recall_curve(base[keep], sub, order, model))
+    assert recall_upper_bound(base, covs, order, 3, model, weights=w) == pytest.approx(
+        recall_upper_bound(base[keep], sub, order, 3, model))
+    np.testing.assert_allclose(score_upper_bound(base, covs, order, 3, weights=w),
+                               score_upper_bound(base[keep], sub, order, 3))
+    res, ref = expected_recall_greedy(base, covs, 3, model, weights=w), expected_recall_greedy(base[keep], sub, 3, model)
+    assert res.order == ref.order
+    np.testing.assert_allclose(np.asarray(res.gains) * keep.sum() / 40, ref.gains, rtol=1e-9)
+    assert expected_localized(base, model, w) == pytest.approx(expected_localized(base[keep], model) * 40 / keep.sum())

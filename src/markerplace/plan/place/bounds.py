@@ -78,22 +78,32 @@ def per_pose_bound_scores(base_info: np.ndarray, coverages: Sequence[MarkerCover
 
 
 def recall_upper_bound(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], chosen: Sequence[int], k: int,
-                       model: SuccessModel, existing: Sequence[MarkerCoverage] = ()) -> float:
+                       model: SuccessModel, existing: Sequence[MarkerCoverage] = (),
+                       weights: np.ndarray | None = None) -> float:
     """Upper bound on the predicted recall (share of the N poses, in [0, 1]) of ANY k candidates
     (with the existing markers), from the plan ``chosen`` (module docstring; valid because each
-    pose's score is submodular and P increasing, not because F is submodular: it is not)."""
+    pose's score is submodular and P increasing, not because F is submodular: it is not). With
+    (N,) pose ``weights`` >= 0 (``plan --where``) the share is weighted (still a bound: each
+    pose's term is)."""
     _, bound = per_pose_bound_scores(base_info, coverages, chosen, k, existing)
-    return float(np.mean(model.probability(bound))) if len(bound) else 0.0
+    return _mean(model.probability(bound), weights) if len(bound) else 0.0
+
+
+def _mean(values: np.ndarray, weights: np.ndarray | None) -> float:
+    """Mean of (N,) values, weighted by (N,) ``weights`` when given."""
+    return float(np.mean(values)) if weights is None else float(np.sum(values * weights) / np.sum(weights))
 
 
 def score_upper_bound(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], chosen: Sequence[int], k: int,
-                      existing: Sequence[MarkerCoverage] = ()) -> tuple[float, float]:
+                      existing: Sequence[MarkerCoverage] = (),
+                      weights: np.ndarray | None = None) -> tuple[float, float]:
     """(mean score of the plan ``chosen``, upper bound on the mean score of ANY k candidates),
-    nats over the N poses (module docstring; the score sum is monotone submodular)."""
+    nats over the N poses (module docstring; the score sum is monotone submodular), weighted by
+    (N,) pose ``weights`` when given."""
     score, bound = per_pose_bound_scores(base_info, coverages, chosen, k, existing)
     if not len(score):
         return 0.0, 0.0
-    return float(score.mean()), float(bound.mean())
+    return _mean(score, weights), _mean(bound, weights)
 
 
 def submodularity_sample(f: Callable[[Sequence[int]], float], C: int, trials: int, rng: np.random.Generator,

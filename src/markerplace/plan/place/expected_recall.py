@@ -37,25 +37,27 @@ from markerplace.plan.score.success_model import SuccessModel
 log = logging.getLogger(__name__)
 
 
-def expected_localized(info: np.ndarray, model: SuccessModel) -> float:
-    """``sum_p P(-H(Lambda_p))``: expected number of poses that localize (poses, not percent).
+def expected_localized(info: np.ndarray, model: SuccessModel, weights: np.ndarray | None = None) -> float:
+    """``sum_p w_p P(-H(Lambda_p))``: expected number of poses that localize (poses, not percent).
 
     Args:
         info: (N, 6, 6) SPD information matrices (1/rad^2, 1/m^2).
         model: success model of the score.
+        weights: (N,) pose weights summing to N (``plan --where``), or None (every pose 1).
     """
     info = np.asarray(info, dtype=float)
     if info.shape[0] == 0:
         return 0.0
-    return float(np.sum(model.probability(-entropy(info))))
+    p = model.probability(-entropy(info))
+    return float(np.sum(p if weights is None else p * weights))
 
 
 class _RecallProblem(GreedyProblem):
     """:class:`GreedyProblem` plus the current score of every pose and expected-pose gains."""
 
     def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage],
-                 model: SuccessModel):
-        super().__init__(base_info, coverages, q=100.0)  # q is unused here
+                 model: SuccessModel, weights: np.ndarray | None = None):
+        super().__init__(base_info, coverages, q=100.0, weights=weights)  # q is unused here
         self.model = model
         self.scores = -entropy(base_info) if self.N else np.zeros(0)
 
@@ -69,14 +71,16 @@ class _RecallProblem(GreedyProblem):
         all N poses (nats) of candidates ``cands``."""
         nz, pidx, g, seg = self.pose_gains(np.asarray(cands, dtype=np.int64))
         dp = self.model.probability_increase(self.scores[pidx], g) if len(g) else g
-        return self.segment_sums(nz, seg, dp), self.segment_sums(nz, seg, g) / max(self.N, 1)
+        w = self.pose_weight(pidx)
+        return self.segment_sums(nz, seg, dp * w), self.segment_sums(nz, seg, g * w) / max(self.N, 1)
 
 
 def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,
                            model: SuccessModel,
                            existing: Sequence[MarkerCoverage] | None = None,
                            progress: Callable[[int, int, int, float], None] | None = None,
-                           stop_at: float | None = None) -> PlacementResult:
+                           stop_at: float | None = None,
+                           weights: np.ndarray | None = None) -> PlacementResult:
     """Greedy placement maximizing the expected number of poses that localize (plain greedy).
 
     Each of the k rounds evaluates ``Delta(m | S)`` (module docstring) for every remaining
@@ -98,6 +102,8 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
             share times N): the greedy stops after the first pick that reaches it, or before a
             pick that would add no more than :data:`~markerplace.plan.place.recall_curve.NEGLIGIBLE`
             of the poses (at least one pick is made); k is then the most picks. None: k picks.
+        weights: (N,) pose weights summing to N (``plan --where``), or None (every pose 1): the
+            objective is ``sum_p w_p P(s_p)``, still in poses.
 
     Returns:
         :class:`PlacementResult` with ``order`` (k picks, fewer with ``stop_at``); ``gains`` = expected poses gained by each pick
@@ -113,16 +119,15 @@ def expected_recall_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCove
     k = check_k(k, C)
     lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    prob = _RecallProblem(lam, coverages, model)
-    log.debug("expected_recall_greedy: N=%d C=%d k=%d, expected localized before %.3f",
-              N, C, k, float(np.sum(model.probability(prob.scores))))
+    prob = _RecallProblem(lam, coverages, model, weights)
+    expected = float(np.sum(model.probability(prob.scores) * prob.pose_weight(np.arange(N))))
+    log.debug("expected_recall_greedy: N=%d C=%d k=%d, expected localized before %.3f", N, C, k, expected)
 
     order: list[int] = []
     gains: list[float] = []
     means: list[float] = []
     evaluations = 0
     remaining = np.ones(C, dtype=bool)
-    expected = float(np.sum(model.probability(prob.scores)))
     for it in range(k):
         cands = np.flatnonzero(remaining)
         dg, mg = prob.expected_gains(cands)

@@ -28,6 +28,9 @@ Tie and eligibility rules (exact, so plain and lazy greedy agree bit for bit)
   smallest candidate index. Only when no eligible candidate is left are ineligible ones picked,
   ranked by their mean information gain over all N poses (their q-th percentile gain is 0),
   again ties to the smallest index.
+* Pose weights (``plan --where``): ``P_m`` is the share of the total weight that sees m, q comes
+  from v over the candidates with ``P_m > 0`` (:func:`weighted_q_from_v`), gains are weighted
+  percentiles and means; without weights every line above holds as it is.
 * Both keys only shrink as markers are placed (per-pose gains shrink as Lambda grows; a
   percentile and a mean are monotone in every element), so stale keys are upper bounds and
   the lazy greedy returns exactly the plain greedy's sequence.
@@ -119,9 +122,15 @@ def percentile_with_zeros(values: np.ndarray, n_total: int, q: float,
     return float(np.partition(values, j)[j])
 
 
-def coverage_percentages(coverages: Sequence[MarkerCoverage], num_poses: int) -> np.ndarray:
-    """(C,) ``P_m = 100 |C_m| / N``: percentage of feasible poses that see each candidate."""
-    return np.array([100.0 * len(c) / num_poses for c in coverages], dtype=float)
+def coverage_percentages(coverages: Sequence[MarkerCoverage], num_poses: int,
+                         weights: np.ndarray | None = None) -> np.ndarray:
+    """(C,) ``P_m = 100 |C_m| / N``: percentage of feasible poses that see each candidate; with
+    (N,) pose ``weights``, the percentage of the total weight."""
+    if weights is None:
+        return np.array([100.0 * len(c) / num_poses for c in coverages], dtype=float)
+    w = np.asarray(weights, dtype=float)
+    total = max(float(w.sum()), 1e-300)
+    return np.array([100.0 * float(w[c.pose_idx].sum()) / total for c in coverages], dtype=float)
 
 
 def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
@@ -148,6 +157,26 @@ def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
     return 100.0 - p_star, P > p_star
 
 
+def weighted_q_from_v(coverage_pct: np.ndarray, v: float, weighted: bool) -> tuple[float, np.ndarray]:
+    """:func:`q_from_v`, and with pose weights (``plan --where``) taken over the candidates some
+    weighted pose sees (``P_m > 0``): as the planner drops spots no camera pose sees, a spot no
+    weighted pose sees does not compete (nor pull p* to 0, which would make q = 100, the
+    largest gain). When no candidate is seen from a weighted pose, q = 100 and none is eligible
+    (the picks then go by mean gain, 0: the lowest indices), with a warning."""
+    if not weighted:
+        return q_from_v(coverage_pct, v)
+    P = np.asarray(coverage_pct, dtype=float).reshape(-1)
+    seen = P > 0.0
+    eligible = np.zeros(len(P), dtype=bool)
+    if not seen.any():
+        q_from_v(P, v)  # the same errors (v out of range, no candidates)
+        log.warning("no candidate tag is seen from a camera pose with a weight above 0 (--where): the picks are "
+                    "arbitrary; widen the zones or routes, or set default_weight above 0")
+        return 100.0, eligible
+    q, eligible[seen] = q_from_v(P[seen], v)
+    return q, eligible
+
+
 # --------------------------------------------------------------------------------------------
 # Greedy
 # --------------------------------------------------------------------------------------------
@@ -156,8 +185,11 @@ def q_from_v(coverage_pct: np.ndarray, v: float) -> tuple[float, np.ndarray]:
 class GreedyProblem:
     """Flattened coverages for batched gain evaluation."""
 
-    def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float):
+    def __init__(self, base_info: np.ndarray, coverages: Sequence[MarkerCoverage], q: float,
+                 weights: np.ndarray | None = None):
         self.N = base_info.shape[0]
+        self.weights = None if weights is None else np.asarray(weights, dtype=float).reshape(self.N)
+        self.q = float(q)
         self.sizes = np.array([len(c) for c in coverages], dtype=np.int64)
         self.offsets = np.zeros(len(coverages) + 1, dtype=np.int64)
         np.cumsum(self.sizes, out=self.offsets[1:])
@@ -201,14 +233,22 @@ class GreedyProblem:
             out[nz] = np.bincount(seg, weights=values, minlength=int(np.count_nonzero(nz)))
         return out
 
+    def pose_weight(self, pidx: np.ndarray) -> np.ndarray | float:
+        """Weights of poses ``pidx`` (1.0 when the problem has none)."""
+        return 1.0 if self.weights is None else self.weights[pidx]
+
     def evaluate(self, cands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """q-th percentile gains and mean gains (nats) of candidates ``cands``."""
+        """q-th percentile gains and mean gains (nats) of candidates ``cands``; with pose
+        weights, the weighted percentile and the weighted mean (:meth:`_weighted_percentiles`)."""
         cands = np.asarray(cands, dtype=np.int64)
         sizes = self.sizes[cands]
         qg = np.zeros(len(cands))
-        nz, _, g, seg = self.pose_gains(cands)
-        mg = self.segment_sums(nz, seg, g) / max(self.N, 1)
+        nz, pidx, g, seg = self.pose_gains(cands)
+        mg = self.segment_sums(nz, seg, g * self.pose_weight(pidx)) / max(self.N, 1)
         if not np.any(nz):
+            return qg, mg
+        if self.weights is not None:
+            qg[nz] = self._weighted_percentiles(pidx, g, seg, int(np.count_nonzero(nz)))
             return qg, mg
         live = cands[nz]
         # Per-segment k-th smallest: sort by (segment, gain); segments stay in place.
@@ -221,6 +261,35 @@ class GreedyProblem:
         out[pos] = srt[starts[pos] + j[pos] - 1]
         qg[nz] = out
         return qg, mg
+
+    def _weighted_percentiles(self, pidx: np.ndarray, g: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
+        """(n,) weighted q-th percentile per segment of the gains padded with zeros: the
+        smallest gain x with (weight of the poses whose gain is <= x) >= q/100 of the total
+        weight, the unseen poses gaining 0 (``inverted_cdf`` with weights; with every weight 1
+        it is the unweighted rule: the tests check the same picks).
+
+        Each segment is summed on its own, in its own sorted order, so a candidate's gain does
+        not depend on which others are evaluated with it (lazy greedy evaluates it alone); when
+        rounding leaves the last cumulative weight a hair under the threshold (q = 100), the
+        largest gain of a weighted pose is taken, as exact arithmetic would."""
+        w = self.weights
+        total = float(w.sum())
+        thresh = self.q / 100.0 * total  # compared exactly, as numpy's inverted_cdf does
+        order = np.lexsort((g, seg))
+        srt, ws = g[order], w[pidx][order]
+        bounds = np.searchsorted(seg[order], np.arange(n + 1))
+        out = np.zeros(n)
+        for j in range(n):
+            a, b = bounds[j], bounds[j + 1]
+            keep = ws[a:b] > 0.0  # poses that weigh nothing cannot move a weighted percentile
+            if not keep.any():
+                continue
+            vals, cum = srt[a:b][keep], np.cumsum(ws[a:b][keep])
+            need = thresh - (total - float(cum[-1]))  # what the seen poses must add to the unseen ones' zeros
+            if need <= 0.0:
+                continue
+            out[j] = vals[min(int(np.searchsorted(cum, need, side="left")), len(vals) - 1)]
+        return out
 
 
 def check_k(k: int, num_candidates: int) -> int:
@@ -236,7 +305,8 @@ def check_k(k: int, num_candidates: int) -> int:
 def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: int,
                v: float = 90.0, lazy: bool = True,
                existing: Sequence[MarkerCoverage] | None = None,
-               progress: Callable[[int, int, int, float], None] | None = None) -> PlacementResult:
+               progress: Callable[[int, int, int, float], None] | None = None,
+               weights: np.ndarray | None = None) -> PlacementResult:
     """Optimized marker placement (the paper's Algorithm 1), optionally with lazy evaluation.
 
     Args:
@@ -248,6 +318,9 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
         existing: coverages of markers already in the scene; their information is added to
             ``base_info`` before the greedy starts (they are not candidates).
         progress: optional callback ``progress(i, k, candidate, gain)`` after each pick.
+        weights: (N,) pose weights >= 0 (``plan --where``), or None (every pose 1): ``P_m`` is
+            the share of the total weight that sees m, the gain the weighted q-th percentile and
+            the mean the weighted mean (still monotone in every pose's gain, so lazy stays exact).
 
     Returns:
         :class:`PlacementResult`. Plain and lazy return identical order and gains.
@@ -259,8 +332,8 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
     k = check_k(k, C)
     lam = apply_coverages(base_info, existing or ())  # the existing markers count as placed
     N = lam.shape[0]
-    q, eligible = q_from_v(coverage_percentages(coverages, N), v)
-    prob = GreedyProblem(lam, coverages, q)
+    q, eligible = weighted_q_from_v(coverage_percentages(coverages, N, weights), v, weights is not None)
+    prob = GreedyProblem(lam, coverages, q, weights)
     log.debug("omp_greedy: N=%d C=%d k=%d v=%g q=%.4f eligible=%d lazy=%s",
               N, C, k, v, q, int(eligible.sum()), lazy)
 
@@ -323,5 +396,5 @@ def omp_greedy(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], k: in
 
 __all__ = [
     "GreedyProblem", "PlacementResult", "apply_coverages", "check_k", "coverage_percentages", "inverted_cdf_rank",
-    "omp_greedy", "percentile_with_zeros", "q_from_v",
+    "omp_greedy", "percentile_with_zeros", "q_from_v", "weighted_q_from_v",
 ]

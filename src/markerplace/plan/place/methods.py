@@ -191,7 +191,8 @@ class OMP(PlacementMethod):
             log.info("omp pick %d/%d: candidate %d, gain %.3f", i + 1, k, candidate, gain)
 
         res = omp_greedy(data.base_info, data.coverages[:C], k, v=self.conf.v, lazy=self.conf.lazy,
-                         existing=data.coverages[C:], progress=report if progress else None)
+                         existing=data.coverages[C:], progress=report if progress else None,
+                         weights=data.pose_weight)
         return Choice(np.asarray(res.order, dtype=np.int64), np.asarray(res.gains, dtype=float), float(res.q),
                       res.info_after)
 
@@ -319,7 +320,8 @@ class ExpectedRecall(PlacementMethod):
         target = self.conf.target_recall
         res = expected_recall_greedy(data.base_info, covs[:C], k, fit["model"], existing=covs[C:],
                                      progress=report if progress else None,
-                                     stop_at=None if target is None else float(target) * len(data.base_info))
+                                     stop_at=None if target is None else float(target) * len(data.base_info),
+                                     weights=data.pose_weight)
         return Choice(np.asarray(res.order, dtype=np.int64), np.asarray(res.gains, dtype=float), float("nan"),
                       res.info_after)
 

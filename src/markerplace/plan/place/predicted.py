@@ -70,7 +70,7 @@ def model_methods(config: PlacementConfig) -> list[str]:
 def _curve(data: PlanData, order: np.ndarray) -> np.ndarray:
     fit = data.calibration[RECALL_MODEL]
     covs, C = fit["coverages"], data.num_candidates
-    return recall_curve(data.base_info, covs[:C], order, fit["model"], covs[C:])
+    return recall_curve(data.base_info, covs[:C], order, fit["model"], covs[C:], data.pose_weight)
 
 
 def place_for_target(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (),
@@ -129,7 +129,7 @@ def predicted_recall(data: PlanData, placement: Placement, config: PlacementConf
     order = np.asarray(placement.candidates, dtype=np.int64)
     curve = _curve(data, order)
     covs, C, K = fit["coverages"], data.num_candidates, len(order)
-    bound = recall_upper_bound(data.base_info, covs[:C], order, K, fit["model"], covs[C:])
+    bound = recall_upper_bound(data.base_info, covs[:C], order, K, fit["model"], covs[C:], data.pose_weight)
     return {"available": True, "model": fit["model"].to_json(),
             "marker_model": method_named(RECALL_MODEL, config).conf.tag_model,
             "k": list(range(K + 1)), "recall": [round(float(r), 6) for r in curve],
@@ -147,7 +147,8 @@ def score_bound(data: PlanData, placement: Placement) -> dict:
     C = data.num_candidates
     order = np.asarray(placement.candidates, dtype=np.int64)
     existing = data.coverages[C:]
-    before, _ = score_upper_bound(data.base_info, data.coverages[:C], [], 0, existing)
-    plan, bound = score_upper_bound(data.base_info, data.coverages[:C], order, len(order), existing)
+    before, _ = score_upper_bound(data.base_info, data.coverages[:C], [], 0, existing, data.pose_weight)
+    plan, bound = score_upper_bound(data.base_info, data.coverages[:C], order, len(order), existing,
+                                    data.pose_weight)
     return {"k": len(order), "mean_score_existing": before, "mean_score_plan": plan,
             "mean_score_upper_bound": max(bound, plan)}

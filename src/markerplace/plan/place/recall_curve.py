@@ -41,7 +41,8 @@ NEGLIGIBLE = 1e-9
 
 
 def recall_curve(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], order: Sequence[int],
-                 model: SuccessModel, existing: Sequence[MarkerCoverage] = ()) -> np.ndarray:
+                 model: SuccessModel, existing: Sequence[MarkerCoverage] = (),
+                 weights: np.ndarray | None = None) -> np.ndarray:
     """(K + 1,) predicted recall R(0), ..., R(K) after the first j tags of ``order`` (module docstring).
 
     Args:
@@ -51,6 +52,8 @@ def recall_curve(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], ord
         order: (K,) candidate indices in placement order.
         model: P(success | score).
         existing: coverages of markers already on the walls (in every R(j), R(0) included).
+        weights: (N,) pose weights summing to N (``plan --where``): R(j) = (1/N) sum_p w_p P(.);
+            None: every pose 1.
 
     Returns:
         shares in [0, 1] (NaN-free); all zeros when N == 0.
@@ -63,14 +66,15 @@ def recall_curve(base_info: np.ndarray, coverages: Sequence[MarkerCoverage], ord
     for ex in existing:
         np.add.at(lam, ex.pose_idx, ex.info)
     prob = model.probability(-entropy(lam))
-    total = float(prob.sum())
+    total = float(prob.sum()) if weights is None else float(np.sum(prob * weights))
     out[0] = total / N
     for j, m in enumerate(order, start=1):
         cov = coverages[int(m)]
         if len(cov):
             lam[cov.pose_idx] += cov.info
             new = model.probability(-entropy(lam[cov.pose_idx]))
-            total += float(np.sum(new - prob[cov.pose_idx]))
+            change = new - prob[cov.pose_idx]
+            total += float(np.sum(change if weights is None else change * weights[cov.pose_idx]))
             prob[cov.pose_idx] = new
         out[j] = total / N
     return np.clip(out, 0.0, 1.0)

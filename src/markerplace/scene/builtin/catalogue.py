@@ -2,15 +2,17 @@
 
 Sizes follow the paper's scenes: office ~110 m^2, studio ~150 m^2, apartment ~300 m^2,
 room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests, the two-storey ``house`` (158 m^2,
-:mod:`.house`) and the two-storey office building ``campus`` for scale tests (2064 m^2,
-:mod:`.campus`). Coordinates are metres, world z up; room
+:mod:`.house`), the two-storey office building ``campus`` for scale tests (2064 m^2,
+:mod:`.campus`) and the hotel floor ``corridor`` (288 m^2, ten identical guest rooms: hard to
+localize in, :mod:`.corridor`; :func:`.corridor.build_corridor` takes the room count). Coordinates are metres, world z up; room
 bounds are wall centre lines; furniture and pictures are in room-local coordinates.
 
 The layouts are data: the rooms, furniture, pictures, windows and doors of each built-in are in
 ``scene/builtin/specs/<name>.toml`` (TOML; the format is in each file's header and in
 :mod:`.spec_loader`, which reads them). The single-storey ones are read whole by
 :func:`.spec_loader.load_layout`; :mod:`.house` and :mod:`.campus` add their storeys' heights and
-the geometry beyond the layouts (stairs, slabs, glazing).
+the geometry beyond the layouts (stairs, slabs, glazing); :mod:`.corridor` lays out its guest
+rooms and corridor from the room types in its file.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import functools
 from markerplace.errors import UserError
 from markerplace.scene.builtin.layout import Building, Layout
 from markerplace.scene.builtin.campus import build_campus, campus_plan
+from markerplace.scene.builtin.corridor import build_corridor, corridor_plan
 from markerplace.scene.builtin.house import build_house, house_plan
 from markerplace.scene.builtin.procedural import build_scene
 from markerplace.scene.builtin.spec_loader import load_layout
@@ -27,9 +30,10 @@ from markerplace.scene.types import Scene
 
 # single-storey built-ins: their room specs are data (specs/<name>.toml, read by spec_loader)
 _LAYOUTS = {name: functools.partial(load_layout, name) for name in ("office", "studio", "apartment", "room", "tiny")}
-_LAYOUTS |= {"house": house_plan, "campus": campus_plan}
-# multi-storey built-ins: their own builders (single-storey ones use procedural.build_scene)
-_BUILDERS = {"house": build_house, "campus": build_campus}
+_LAYOUTS |= {"house": house_plan, "campus": campus_plan, "corridor": corridor_plan}
+# built-ins with their own builders (multi-storey, or laid out in code); the others use
+# procedural.build_scene
+_BUILDERS = {"house": build_house, "campus": build_campus, "corridor": build_corridor}
 
 
 def builtin_names() -> list[str]:

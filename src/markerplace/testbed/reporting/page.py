@@ -30,6 +30,7 @@ from markerplace.plan.discretize.artifact import load as load_disc
 from markerplace.render.renderer import Renderer
 from markerplace.scene.worldframe import world_offset
 from markerplace.testbed import metrics
+from markerplace.testbed.conditions import CLEAN
 from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, baseline_methods
 from markerplace.testbed.metrics import hit_mask, pose_errors_batch
 
@@ -220,6 +221,8 @@ def write_evaluation_report(out: str | Path, scene_name: str, placements, predic
                 ["k", ", ".join(str(k) for k in sorted(set(config.study.ks)))],
                 ["runs per randomized method", config.study.runs], ["localizer", config.localization.localizer],
                 ["thresholds", ", ".join(metrics.threshold_label(t) for t in config.thresholds)]]
+    if tuple(config.test.conditions) != (CLEAN,):
+        settings.append(["query conditions (the gallery: clean)", ", ".join(config.test.conditions)])
     tables_md = out / "tables.md"
     body = [f"<h1>Evaluation: {esc(scene_name)}</h1>",
             "<p>Simulated localization of test images with each marker placement (the paper's testbed). "

@@ -17,6 +17,7 @@ from markerplace.report.figures import recall_vs_k
 from markerplace.runtime.atomic_io import write_json, write_npz
 from markerplace.runtime.cache import config_dict
 from markerplace.testbed import metrics
+from markerplace.testbed.conditions import set_name, split_set
 from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
 from markerplace.testbed.reporting.paired import paired_differences, paired_markdown, paired_table
@@ -26,7 +27,8 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(out: Path, scene_name: str, placements, predictions: dict, test_poses: dict,
-                  base_score: np.ndarray, config, plan_config, scene=None) -> tuple[list[dict], str]:
+                  base_score: np.ndarray, config, plan_config, scene=None, where: dict | None = None
+                  ) -> tuple[list[dict], str]:
     """recall.csv, query_errors.npz, tables.md, recall_vs_k.png, config.json and report.html
     (:func:`markerplace.testbed.reporting.page.write_evaluation_report`) from predictions.
 
@@ -34,34 +36,40 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         out: the run folder.
         scene_name: scene label of the tables.
         placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
-        predictions: ``(method, run, k, test set) -> (N, 4, 4)`` estimated ``world_from_cam``
-            per test image (all NaN where localization failed).
+        predictions: ``(method, run, k, image set) -> (N, 4, 4)`` estimated ``world_from_cam``
+            per test image (all NaN where localization failed); an image set is a test set
+            under a query condition (:func:`~markerplace.testbed.conditions.set_name`): rows,
+            tables and ``query_errors.npz``'s ``<image set>_*`` arrays are per image set.
         test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
+        where: the ``--where`` file as read (GeoJSON), recorded in config.json; None: none.
         config, plan_config: the evaluate and plan settings.
         scene: the scene (internal frame), to render report.html's gallery (None: no images).
 
     Returns:
         The recall rows and the markdown of the main table (first test set, main threshold).
     """
-    results = {key: metrics.pose_errors_batch(est, test_poses[key.test_set].world_from_cam) for key, est in predictions.items()}
+    results = {key: metrics.pose_errors_batch(est, test_poses[split_set(key.test_set)[0]].world_from_cam)
+               for key, est in predictions.items()}
     labels = [metrics.threshold_label(t) for t in config.thresholds]
     rows = []
     arrays: dict[str, np.ndarray] = {}
-    for ts in config.test.sets:
-        keys = list(dict.fromkeys((p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, ts) in results))
+    names = [set_name(ts, c) for ts in config.test.sets for c in config.test.conditions]
+    for name in names:
+        ts, cond = split_set(name)
+        keys = list(dict.fromkeys((p.method, p.run, p.k) for p in placements if (p.method, p.run, p.k, name) in results))
         for method, run, k in keys:
-            t_err, r_err = results[(method, run, k, ts)]
+            t_err, r_err = results[(method, run, k, name)]
             for label, (tm, rm) in zip(labels, config.thresholds):
-                rows.append(dict(scene=scene_name, method=method, run=run, k=k, test_set=ts, threshold=label,
-                                 recall=metrics.recall(t_err, r_err, tm, rm), n_tests=len(t_err)))
-        arrays[f"{ts}_method"] = np.array([k[0] for k in keys], dtype=str)
-        arrays[f"{ts}_run"] = np.array([k[1] for k in keys], dtype=np.int64)
-        arrays[f"{ts}_k"] = np.array([k[2] for k in keys], dtype=np.int64)
-        arrays[f"{ts}_t_err"] = np.array([results[k + (ts,)][0] for k in keys]).reshape(len(keys), -1)
-        arrays[f"{ts}_r_err"] = np.array([results[k + (ts,)][1] for k in keys]).reshape(len(keys), -1)
-        arrays[f"{ts}_world_from_cam"] = test_poses[ts].world_from_cam
-        arrays[f"{ts}_score"] = np.asarray(base_score)[test_poses[ts].source_index]
+                rows.append(dict(scene=scene_name, method=method, run=run, k=k, test_set=ts, condition=cond,
+                                 threshold=label, recall=metrics.recall(t_err, r_err, tm, rm), n_tests=len(t_err)))
+        arrays[f"{name}_method"] = np.array([k[0] for k in keys], dtype=str)
+        arrays[f"{name}_run"] = np.array([k[1] for k in keys], dtype=np.int64)
+        arrays[f"{name}_k"] = np.array([k[2] for k in keys], dtype=np.int64)
+        arrays[f"{name}_t_err"] = np.array([results[k + (name,)][0] for k in keys]).reshape(len(keys), -1)
+        arrays[f"{name}_r_err"] = np.array([results[k + (name,)][1] for k in keys]).reshape(len(keys), -1)
+        arrays[f"{name}_world_from_cam"] = test_poses[ts].world_from_cam
+        arrays[f"{name}_score"] = np.asarray(base_score)[test_poses[ts].source_index]
     write_recall_csv(out / "recall.csv", rows)
     write_npz(out / "query_errors.npz", **arrays)
     main = metrics.threshold_label(metrics.main_threshold(config.thresholds))
@@ -69,10 +77,10 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     md = tables_markdown(rows, ks, main, labels)
     summary = main_tables_markdown(rows, ks, main).strip()
     t_main, r_main = next(t for t in config.thresholds if metrics.threshold_label(t) == main)
-    hits = {ts: {(m, run, k): metrics.hit_mask(*res, t_main, r_main)
-                 for (m, run, k, t), res in results.items() if t == ts} for ts in config.test.sets}
+    hits = {name: {(m, run, k): metrics.hit_mask(*res, t_main, r_main)
+                   for (m, run, k, t), res in results.items() if t == name} for name in names}
     md += paired_markdown(hits, ks, main, seed=config.seed)
-    ts0 = config.test.sets[0]
+    ts0 = names[0]  # the first test set, clean unless --conditions leaves clean out
     diffs = paired_differences(hits[ts0], ks, seed=config.seed)
     if diffs:  # the printed summary carries the intervals too: a recall table alone can be noise
         summary += (f"\n\nPaired differences, `{ts0}` test set, {main} (method minus the baseline's run mean, "
@@ -85,7 +93,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         recall_vs_k(out / "recall_vs_k.png", [0] + ks, curves, f"{scene_name}: recall at {main} ({ts0} test set)")
 
     write_json(out / "config.json", {"evaluate": config_dict(config), "plan": config_dict(plan_config),
-                                     "environment": environment()})
+                                     "environment": environment(), **({} if where is None else {"where": where})})
 
     write_evaluation_report(out, scene_name, placements, predictions, test_poses, config, plan_config.imaging.camera,
                             scene=scene)

@@ -3,7 +3,12 @@
 A *recall row* is a dict with the ``recall.csv`` columns :data:`CSV_COLUMNS`:
 ``scene, method, run, k, test_set, threshold, recall, n_tests`` where ``threshold`` is a label
 such as ``5cm/5deg`` (see :func:`markerplace.testbed.metrics.threshold_label`), ``recall`` is a
-fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``.
+fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``. A row may also carry
+``condition``, the query condition (:mod:`markerplace.testbed.conditions`; ``clean`` when
+absent); ``recall.csv`` has a ``condition`` column (after ``test_set``) only when some row's
+condition is not ``clean``, and the tables then key each test set by condition
+(``weighted@blur``, :func:`~markerplace.testbed.conditions.set_name`) and add a table of
+recall per condition.
 
 Markdown tables print recall in percent. Methods are listed in registry order
 (:data:`~markerplace.plan.place.methods.PLACEMENT_METHODS`), labelled by the method's ``label``, then
@@ -23,9 +28,22 @@ import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.testbed.conditions import CLEAN, set_name, split_set
 from markerplace.testbed.marker_sets import NO_MARKERS
 
 CSV_COLUMNS = ("scene", "method", "run", "k", "test_set", "threshold", "recall", "n_tests")
+#: ``recall.csv``'s columns when some row has a query condition other than ``clean``.
+CONDITION_COLUMNS = CSV_COLUMNS[:5] + ("condition",) + CSV_COLUMNS[5:]
+
+
+def has_conditions(rows: Iterable[dict]) -> bool:
+    """Some row's query condition is not ``clean``."""
+    return any(r.get("condition", CLEAN) != CLEAN for r in rows)
+
+
+def image_set(row: dict) -> str:
+    """The image set of a recall row: its test set, ``<test set>@<condition>`` under a condition."""
+    return set_name(row["test_set"], row.get("condition", CLEAN))
 
 _MD_SPECIAL = str.maketrans({c: "\\" + c for c in "\\`*_[]|~"} | {"<": "&lt;", ">": "&gt;", "&": "&amp;",
                                                                          "\n": " ", "\r": " ", "\t": " "})
@@ -58,12 +76,14 @@ def display_name(method: str) -> str:
 
 def write_recall_csv(path: str | Path, rows: Iterable[dict]) -> None:
     """Write recall rows (see module docstring) as CSV, atomically; recall with 6 decimals."""
+    rows = list(rows)
+    columns = CONDITION_COLUMNS if has_conditions(rows) else CSV_COLUMNS
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
-            writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+            writer = csv.DictWriter(fh, fieldnames=columns)
             writer.writeheader()
             for r in rows:
-                out = {c: r[c] for c in CSV_COLUMNS}
+                out = {c: r.get(c, CLEAN) if c == "condition" else r[c] for c in columns}
                 out["recall"] = f"{float(r['recall']):.6f}"
                 writer.writerow(out)
 
@@ -89,10 +109,11 @@ def format_mean_std(values: Sequence[float], percent: bool = True, digits: int =
 
 
 def _group(rows: Iterable[dict]) -> dict:
-    """(scene, test_set, threshold, method, k) -> list of recalls over runs."""
+    """(scene, image set, threshold, method, k) -> list of recalls over runs (image set:
+    :func:`image_set`)."""
     out: dict = defaultdict(list)
     for r in rows:
-        out[(r["scene"], r["test_set"], r["threshold"], r["method"], int(r["k"]))].append(float(r["recall"]))
+        out[(r["scene"], image_set(r), r["threshold"], r["method"], int(r["k"]))].append(float(r["recall"]))
     return out
 
 
@@ -103,7 +124,7 @@ def _methods(rows: Sequence[dict]) -> list[str]:
 
 
 def method_table(rows: Sequence[dict], test_set: str, threshold: str, ks: Sequence[int]) -> str:
-    """Markdown table like the paper's Table I for one test set and threshold.
+    """Markdown table like the paper's Table I for one image set (:func:`image_set`) and threshold.
 
     Rows: scene (with its no-marker recall in parentheses) x method; columns: k. Cells are
     recall in percent, ``mean ± std`` over runs.
@@ -132,31 +153,57 @@ def method_table(rows: Sequence[dict], test_set: str, threshold: str, ks: Sequen
 
 
 def thresholds_table(rows: Sequence[dict], thresholds: Sequence[str], ks: Sequence[int]) -> str:
-    """Markdown table of every (scene, test set, method, threshold): k = 0 (no markers) then ks."""
+    """Markdown table of every (scene, test set, [condition,] method, threshold): k = 0 (no
+    markers) then ks (the condition column only when some row has one, :func:`has_conditions`)."""
     groups = _group(rows)
     methods = _methods(rows)
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
-    test_sets = list(dict.fromkeys(r["test_set"] for r in rows))
-    lines = ["| Scene | Test set | Method | Threshold | k=0 | " + " | ".join(f"k={k}" for k in ks) + " |",
-             "|---|---|---|---|---|" + "---|" * len(ks)]
+    test_sets = list(dict.fromkeys(image_set(r) for r in rows))
+    cond = has_conditions(rows)
+    lines = ["| Scene | Test set | " + ("Condition | " if cond else "") + "Method | Threshold | k=0 | "
+             + " | ".join(f"k={k}" for k in ks) + " |",
+             "|---|---|---|---|---|" + ("---|" if cond else "") + "---|" * len(ks)]
     for scene in scenes:
         for ts in test_sets:
+            label = " | ".join(split_set(ts)) if cond else ts
             for m in methods:
                 for th in thresholds:
                     base = format_mean_std(groups.get((scene, ts, th, "none", 0), []))
                     cells = [format_mean_std(groups.get((scene, ts, th, m, k), [])) for k in ks]
-                    lines.append(f"| {md_text(scene)} | {ts} | {md_name(m)} | {th} | {base} | "
+                    lines.append(f"| {md_text(scene)} | {label} | {md_name(m)} | {th} | {base} | "
                                  + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 def main_tables_markdown(rows: Sequence[dict], ks: Sequence[int], main_threshold: str) -> str:
-    """One Table-I-like table per test set at the main threshold (what ``evaluate`` prints)."""
+    """One Table-I-like table per test set (and query condition, when some row has one) at the
+    main threshold (what ``evaluate`` prints), then :func:`conditions_table` when there are
+    conditions."""
     parts = ["# Localization recall (%)", ""]
-    for ts in dict.fromkeys(r["test_set"] for r in rows):
-        parts += [f"## Test set `{ts}`, recall at {main_threshold} (mean ± std over runs)", "",
-                  method_table(rows, ts, main_threshold, ks), ""]
+    for name in dict.fromkeys(image_set(r) for r in rows):
+        ts, cond = split_set(name)
+        where = f"`{ts}`" + (f", condition `{cond}`" if has_conditions(rows) else "")
+        parts += [f"## Test set {where}, recall at {main_threshold} (mean ± std over runs)", "",
+                  method_table(rows, name, main_threshold, ks), ""]
+    if has_conditions(rows):
+        parts += [f"## Recall per query condition at {main_threshold} (mean ± std over runs)", "",
+                  conditions_table(rows, main_threshold, ks), ""]
     return "\n".join(parts)
+
+
+def conditions_table(rows: Sequence[dict], threshold: str, ks: Sequence[int]) -> str:
+    """Markdown table of recall at ``threshold`` per (scene, test set, method, k) row and query
+    condition column (no markers at k = 0), to read what each condition costs."""
+    groups = _group(rows)
+    conds = list(dict.fromkeys(r.get("condition", CLEAN) for r in rows))
+    lines = ["| Scene | Test set | Method | k | " + " | ".join(f"`{c}`" for c in conds) + " |",
+             "|---|---|---|---|" + "---|" * len(conds)]
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        for ts in dict.fromkeys(r["test_set"] for r in rows):
+            for m, k in [("none", 0)] + [(m, k) for m in _methods(rows) for k in ks]:
+                cells = [format_mean_std(groups.get((scene, set_name(ts, c), threshold, m, k), [])) for c in conds]
+                lines.append(f"| {md_text(scene)} | {ts} | {md_name(m)} | {k} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def tables_markdown(rows: Sequence[dict], ks: Sequence[int], main_threshold: str,
