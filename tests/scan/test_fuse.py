@@ -284,3 +284,21 @@ def test_output_folder_checked_before_fusing(tmp_path, capsys):
     blocker.write_text("x")
     assert main(["--quiet", "fuse", str(root), "--out", str(blocker / "o.ply")]) == 2
     _one_line_error(capsys, "is a file")
+
+
+def test_frame_whose_few_readings_touch_no_block_is_skipped():
+    """Open3D looks at a subsample of the depth pixels to find the blocks a frame touches and
+    aborts when none is found: a frame with a lone reading between the sampled pixels (a scan
+    frame looking down a long corridor) is skipped, not an error, and fuses nothing."""
+    from markerplace.scan.fuse import TSDFFusion
+
+    fusion = TSDFFusion(Intrinsics())
+    rgb = np.zeros((450, 600, 3), np.uint8)
+    outcomes = []
+    for dy, dx in [(0, 1), (1, 1), (3, 2)]:
+        depth = np.zeros((450, 600), np.uint16)
+        depth[200 + dy, 300 + dx] = 1500
+        outcomes.append(fusion.integrate(rgb, depth, 1000.0, np.eye(4)))
+    assert outcomes == [False, False, False] and fusion.frames == 0
+    depth = np.full((450, 600), 1500, np.uint16)
+    assert fusion.integrate(rgb, depth, 1000.0, np.eye(4)) and fusion.frames == 1

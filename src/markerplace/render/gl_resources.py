@@ -117,9 +117,10 @@ def build_program(ctx, proj: np.ndarray, outputs: tuple[bool, bool, bool], alpha
     return prog
 
 
-def vertex_array(ctx, prog, vbo):
+def vertex_array(ctx, prog, vbo, ibo=None):
     """A vertex array of ``vbo`` (records of :data:`~markerplace.render.vertices.VERTEX_DTYPE`)
-    for ``prog``, skipping the fields the program does not read."""
+    for ``prog``, skipping the fields the program does not read; drawn through the uint32 index
+    buffer ``ibo`` (three entries per triangle) when given."""
     fmt, names = [], []
     for name, f, nbytes in VERTEX_ATTRS:
         if name in prog:
@@ -127,4 +128,6 @@ def vertex_array(ctx, prog, vbo):
             names.append(name)
         else:
             fmt.append(f"{nbytes}x")
-    return ctx.vertex_array(prog, [(vbo, " ".join(fmt), *names)])
+    if ibo is None:
+        return ctx.vertex_array(prog, [(vbo, " ".join(fmt), *names)])
+    return ctx.vertex_array(prog, [(vbo, " ".join(fmt), *names)], index_buffer=ibo, index_element_size=4)

@@ -21,7 +21,7 @@ from markerplace.scene.transparency import OPAQUE_ALPHA, drawn_alpha
 from markerplace.scene.types import MeshPart
 from markerplace.tagfamily import outer_size
 
-__all__ = ["MARKER_OFFSET", "VERTEX_DTYPE", "VERTEX_ATTRS", "part_vertices", "marker_vertices"]
+__all__ = ["MARKER_OFFSET", "VERTEX_DTYPE", "VERTEX_ATTRS", "part_vertices", "indexed_part_vertices", "marker_vertices"]
 
 MARKER_OFFSET = 0.004
 """Distance (metres) a marker quad floats in front of its wall, along the marker normal."""
@@ -37,8 +37,23 @@ VERTEX_ATTRS = (("in_pos", "3f", 12), ("in_normal", "3f", 12), ("in_uv", "2f", 8
 def part_vertices(part: MeshPart) -> np.ndarray:
     """De-indexed (3 M,) vertex records of one part (see ``VERTEX_DTYPE``)."""
     faces = np.asarray(part.faces, dtype=np.int64)
+    return _records(part, faces.reshape(-1), faces)
+
+
+def indexed_part_vertices(part: MeshPart) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) vertex records, one per mesh vertex, and the (M, 3) int64 faces indexing them: the
+    same corners as :func:`part_vertices` draws, for a part whose attributes are all per vertex
+    (it must have normals; flat face normals need the de-indexed records)."""
+    if part.normals is None:
+        raise ValueError("indexed vertex records need per-vertex normals")
+    faces = np.asarray(part.faces, dtype=np.int64)
+    return _records(part, np.arange(len(part.vertices)), faces), faces
+
+
+def _records(part: MeshPart, corner: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Vertex records of ``part`` at the mesh vertices ``corner`` (one per record); ``faces``
+    (M, 3) give flat normals when the part has none (then ``corner`` is ``faces`` flattened)."""
     verts = np.asarray(part.vertices, dtype=np.float64)
-    corner = faces.reshape(-1)
     out = np.zeros(len(corner), dtype=VERTEX_DTYPE)
     out["pos"] = verts[corner]
     if part.normals is not None:

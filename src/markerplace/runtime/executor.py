@@ -36,7 +36,7 @@ from typing import Any, Callable, Iterator, Sequence
 from markerplace.errors import UserError
 from markerplace.settings import setting
 from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
-from markerplace.runtime.workers import THREAD_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
+from markerplace.runtime.workers import WORKER_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 import signal
 
 log = logging.getLogger(__name__)
@@ -259,7 +259,7 @@ class DaskExecutor(Executor):
             if kind == "local":
                 logging.getLogger("distributed").setLevel(max(logging.WARNING,
                                                               logging.getLogger("markerplace").level))
-                env = {k: "1" for k in THREAD_ENV}
+                env = dict(WORKER_ENV)
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), children_without_sigint():
                     self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                  dashboard_address=":0")

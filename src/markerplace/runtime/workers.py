@@ -29,7 +29,10 @@ from typing import Callable, Iterator
 from multiprocessing import resource_tracker
 from markerplace.runtime.interrupt import deferred
 
-THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "LP_NUM_THREADS": "0"}
+"""Environment of spawned workers: one BLAS / OpenMP thread, and Mesa llvmpipe rasterizing in the
+drawing thread (``LP_NUM_THREADS=0``; by default it adds a thread per CPU to every worker's GL
+context, which only contend with the other workers when they already fill the cores)."""
 
 
 def default_workers(requested: int = 0, cap: int = 4) -> int:
@@ -117,8 +120,8 @@ def spawn_pool(workers: int, initializer: Callable, initargs: tuple) -> Iterator
     """
     ctx = mp.get_context("spawn")
     stop = ctx.Event()
-    saved = {k: os.environ.get(k) for k in THREAD_ENV}
-    os.environ.update({k: "1" for k in THREAD_ENV})
+    saved = {k: os.environ.get(k) for k in WORKER_ENV}
+    os.environ.update(WORKER_ENV)
     pool = None
 
     def terminate() -> None:

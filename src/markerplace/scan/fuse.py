@@ -157,7 +157,13 @@ class TSDFFusion:
         col = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(rgb, dtype=np.uint8)))
         ext = o3d.core.Tensor(invert(np.asarray(world_from_cam, dtype=np.float64)))
         mult = self.config.trunc_multiplier
-        blocks = self._grid.compute_unique_block_coordinates(dep, self._K, ext, float(depth_scale), float(self.config.depth_max), mult)
+        try:
+            blocks = self._grid.compute_unique_block_coordinates(dep, self._K, ext, float(depth_scale),
+                                                                 float(self.config.depth_max), mult)
+        except RuntimeError as err:  # Open3D samples the depth image: a few far readings may touch no block
+            if "No block is touched" not in str(err):
+                raise
+            return False
         self._grid.integrate(blocks, dep, col, self._K, ext, float(depth_scale), float(self.config.depth_max), mult)
         self.frames += 1
         return True
