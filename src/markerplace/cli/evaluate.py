@@ -55,7 +55,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                           inputs, where=load_where(args.where) if args.where else None)
     print(result.summary)
     extra = "".join(f", {f}" for f, on in (("ceiling.md", args.ceiling), ("calibration.md, calibration.png, map_outcomes.npz",
-                                                                          args.calibration)) if on)
+                                                                          args.calibration),
+                                           ("predicted.csv", args.predicted)) if on)
     print(f"\nwrote {args.out}/recall.csv, tables.md, recall_vs_k.png, query_errors.npz, timings.json, config.json, "
           f"report.html{extra}")
     return 0

@@ -13,7 +13,9 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
 5. per placement: its map (only images with one of its markers in view are re-rendered) and
    the predictions of every image set (:func:`markerplace.testbed.predict.predict_placements`);
 6. optionally the oracle ceiling (:func:`markerplace.testbed.ceiling.run_ceiling`);
-7. metrics and reports from the predictions (:mod:`markerplace.testbed.reporting`).
+7. metrics and reports from the predictions (:mod:`markerplace.testbed.reporting`); with
+   ``--predicted`` each placement's predicted recall against its measured one
+   (:mod:`markerplace.testbed.predicted`).
 
 Every stage is cached with the hash of its inputs (:mod:`markerplace.runtime.stages`); an
 interrupted run resumes where it stopped, inside a stage too: the marker-free images, the
@@ -38,6 +40,7 @@ from markerplace.pipelines.plan import prepare
 from markerplace.pipelines.size_guard import check_first_guess
 from markerplace.plan.config import validate
 from markerplace.plan.folder import PlanFolder
+from markerplace.plan.place.predicted import RECALL_MODEL
 from markerplace.plan.where import Where
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
@@ -54,6 +57,7 @@ from markerplace.testbed.marker_sets import build_placements, find_placement_fil
 from markerplace.testbed.metrics import main_threshold, threshold_label
 from markerplace.testbed.poses import cached_test_poses
 from markerplace.testbed.predict import predict_placements
+from markerplace.testbed.predicted import predict_recalls
 from markerplace.testbed.reporting.calibration import write_calibration_report
 from markerplace.testbed.reporting.summary import write_outputs
 
@@ -117,7 +121,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
                        k=max(config.study.ks), where=where)
-        calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, config.study.methods, progress,
+        models = config.study.methods + ((RECALL_MODEL,) if diag.predicted else ())  # --predicted: the plans' model
+        calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, models, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0
         scene = scene_spec.load()
@@ -153,8 +158,11 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     t0 = time.perf_counter()
     test_predictions = {key: est for key, est in predictions.items()
                         if key.method != SINGLE and split_set(key.test_set)[0] in test_poses}
+    predicted = predict_recalls(data, placements, test_poses, plan_config.placement.tag_size) \
+        if diag.predicted else None
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
-                                  plan_config, scene=scene, where=None if where is None else where.doc)
+                                  plan_config, scene=scene, where=None if where is None else where.doc,
+                                  predicted=predicted)
     if ceiling is not None:
         with atomic_path(out / "ceiling.md") as tmp:
             clean_rows = [r for r in rows if r["condition"] == CLEAN]  # the ceiling is measured clean

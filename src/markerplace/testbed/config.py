@@ -165,6 +165,9 @@ class DiagnosticsConfig:
         calibration: map images localized against the rest of the map without and with each
             placement's tags, and how well the score predicts that
             (:mod:`markerplace.testbed.calibration`).
+        predicted: each placement's predicted recall under the success model plans use (fitted
+            on map images unless ``expected-recall`` is evaluated, which fits it anyway) against
+            its measured recall, and the calibration error (:mod:`markerplace.testbed.predicted`).
     """
 
     ceiling: bool = setting(False, flag="--ceiling", commands=("evaluate",), const=True,
@@ -188,6 +191,21 @@ class DiagnosticsConfig:
                                     "model: AUC of the score as a predictor of success, without and with tags, the "
                                     "fitted logistic, observed vs fitted success per score decile), "
                                     "`calibration.png`, `map_outcomes.npz`")
+    predicted: bool = setting(False, flag="--predicted", commands=("evaluate",), const=True,
+                              help="set each placement's predicted recall (the success model plans use, on the "
+                                   "poses as each test set draws them) against its measured recall per k, with the "
+                                   "calibration error (mean |predicted - measured|, points): predicted.csv, a "
+                                   "section of tables.md and report.html. Fits the model on the map images (one "
+                                   "calibration run, cached) unless expected-recall is in --methods",
+                              doc="each evaluated placement's predicted recall (the success model of "
+                                  "`expected-recall` and of plans' recall curves, fitted on map images; the "
+                                  "feasible poses weighted as each test set draws them) against its measured "
+                                  "recall on the clean test images at the main threshold, per method and k, and "
+                                  "the calibration error (mean absolute difference over the placements, in "
+                                  "percentage points, per test set and method): `predicted.csv`, a section of "
+                                  "`tables.md` and `report.html`, the error in the printed summary "
+                                  "(docs/design.md section 6c). Free when `expected-recall` is in `--methods`; "
+                                  "otherwise one calibration run (cached; about 70 s on `room`)")
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import itertools
 import logging
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,7 +13,6 @@ import pytest
 from markerplace.cli.main import build_parser
 from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
-from markerplace.geometry import world_from_marker_pose
 from markerplace.plan.config import PlanConfig, validate
 from markerplace.plan.place.bounds import (per_pose_bound_scores, recall_upper_bound, score_upper_bound,
                                            submodularity_sample)
@@ -27,37 +25,9 @@ from markerplace.plan.place.recall_curve import knee, recall_curve, target_count
 from markerplace.plan.place.stage import place
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.success_model import SuccessModel
-from markerplace.plan.types import MarkerCoverage, PlanData
+from markerplace.plan.types import MarkerCoverage
 from markerplace.report.recall_section import recall_section
-
-
-def _problem(seed: int = 0, N: int = 40, C: int = 10, E: int = 0):
-    """Random SPD base information and sparse PSD coverages (C candidates then E existing)."""
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(N, 6, 6))
-    base = 100.0 * np.eye(6) + np.matmul(A, np.swapaxes(A, 1, 2))
-    covs = []
-    for _ in range(C + E):
-        idx = np.sort(rng.choice(N, size=int(rng.integers(3, N // 2)), replace=False))
-        B = rng.normal(size=(len(idx), 6, 2)) * rng.uniform(1, 30)
-        covs.append(MarkerCoverage(idx, np.matmul(B, np.swapaxes(B, 1, 2))))
-    return base, covs
-
-
-def _model(base: np.ndarray, slope: float = 1.5, above: float = 1.5) -> SuccessModel:
-    """A logistic whose midpoint sits ``above`` nats over the median base score (most poses
-    start in its convex part)."""
-    s0 = float(np.median(-entropy(base)))
-    return SuccessModel(-slope * (s0 + above), slope, 100, 50, 0.8, s0 - 10.0)
-
-
-def _data(seed: int = 0, N: int = 40, C: int = 10, E: int = 0, above: float = 1.5) -> PlanData:
-    base, covs = _problem(seed, N, C, E)
-    disc = SimpleNamespace(candidate_world_from_marker=np.stack(
-        [world_from_marker_pose(np.array([i, 0.0, 1.5]), np.array([0.0, 1.0, 0.0])) for i in range(C)]))
-    data = PlanData(disc, base, -entropy(base), covs, C, {})
-    data.calibration[RECALL_MODEL] = {"model": _model(base, above=above), "coverages": covs}
-    return data
+from helpers.recall_problems import plan_data as _data, problem as _problem, success_model as _model
 
 
 def test_curve_is_expected_recall_of_each_prefix():

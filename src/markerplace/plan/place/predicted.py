@@ -8,6 +8,8 @@ predicted-recall part of ``placement.json`` says how to get it (:data:`HOW_TO_GE
 
 * :func:`place_for_target`: ``plan --target-recall R`` (the plan's method, nested, placed with
   the most tags allowed, then cut at the first prefix whose predicted recall reaches R).
+* :func:`marker_set_curve`: R(0..k) of any candidates in any order under any pose weights
+  (``evaluate --predicted`` sets each evaluated placement against its test sets with it).
 * :func:`predicted_recall`: the curve R(0..k) of the plan's own order, its knee
   (:mod:`markerplace.plan.place.recall_curve`) and an upper bound on the predicted recall of any
   k candidates (:func:`markerplace.plan.place.bounds.recall_upper_bound`).
@@ -34,8 +36,8 @@ from markerplace.plan.types import Placement, PlanData
 
 log = logging.getLogger(__name__)
 
-__all__ = ["HOW_TO_GET", "KNEE_RULE", "RECALL_MODEL", "place_for_target", "predicted_recall", "score_bound",
-           "wants_success_model"]
+__all__ = ["HOW_TO_GET", "KNEE_RULE", "RECALL_MODEL", "marker_set_curve", "place_for_target", "predicted_recall",
+           "score_bound", "wants_success_model"]
 
 RECALL_MODEL = "expected-recall"
 """The calibrated method whose fitted success model predicts recall for every plan."""
@@ -67,10 +69,18 @@ def model_methods(config: PlacementConfig) -> list[str]:
     return [config.method] + ([RECALL_MODEL] if wants_success_model(config) else [])
 
 
-def _curve(data: PlanData, order: np.ndarray) -> np.ndarray:
+def marker_set_curve(data: PlanData, order: Sequence[int], weights: np.ndarray | None) -> np.ndarray:
+    """(K + 1,) predicted recall R(0..K) after the first j candidates of ``order`` (indices, any
+    order) under the fitted success model (``data.calibration[RECALL_MODEL]``, which must be
+    there), existing markers included, each pose weighted by ``weights`` ((N,) summing to N, or
+    None: every pose 1). A plan's own curve is this with its order and ``data.pose_weight``."""
     fit = data.calibration[RECALL_MODEL]
     covs, C = fit["coverages"], data.num_candidates
-    return recall_curve(data.base_info, covs[:C], order, fit["model"], covs[C:], data.pose_weight)
+    return recall_curve(data.base_info, covs[:C], np.asarray(order, dtype=np.int64), fit["model"], covs[C:], weights)
+
+
+def _curve(data: PlanData, order: np.ndarray) -> np.ndarray:
+    return marker_set_curve(data, order, data.pose_weight)
 
 
 def place_for_target(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (),

@@ -20,6 +20,8 @@ from markerplace.testbed import metrics
 from markerplace.testbed.conditions import set_name, split_set
 from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
+from markerplace.testbed.reporting.predicted import (error_summary, log_predicted, predicted_markdown, predicted_rows,
+                                                    write_predicted_csv)
 from markerplace.testbed.reporting.paired import paired_differences, paired_markdown, paired_table
 from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
 
@@ -27,8 +29,8 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(out: Path, scene_name: str, placements, predictions: dict, test_poses: dict,
-                  base_score: np.ndarray, config, plan_config, scene=None, where: dict | None = None
-                  ) -> tuple[list[dict], str]:
+                  base_score: np.ndarray, config, plan_config, scene=None, where: dict | None = None,
+                  predicted: dict | None = None) -> tuple[list[dict], str]:
     """recall.csv, query_errors.npz, tables.md, recall_vs_k.png, config.json and report.html
     (:func:`markerplace.testbed.reporting.page.write_evaluation_report`) from predictions.
 
@@ -45,6 +47,11 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         where: the ``--where`` file as read (GeoJSON), recorded in config.json; None: none.
         config, plan_config: the evaluate and plan settings.
         scene: the scene (internal frame), to render report.html's gallery (None: no images).
+        predicted: ``evaluate --predicted``: (test set, method, run, k) -> (predicted,
+            predicted on the drawn poses) (:func:`markerplace.testbed.predicted.predict_recalls`):
+            adds ``predicted.csv``, a section of tables.md and report.html, log lines and the
+            calibration error to the summary (:mod:`markerplace.testbed.reporting.predicted`);
+            None: none of it (every output as without the option).
 
     Returns:
         The recall rows and the markdown of the main table (first test set, main threshold).
@@ -86,6 +93,13 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
         summary += (f"\n\nPaired differences, `{ts0}` test set, {main} (method minus the baseline's run mean, "
                     f"recall points, 95 % bootstrap interval; bold: above zero, italic: below):\n\n"
                     + paired_table(diffs, ks))
+    if predicted is not None:
+        compared = predicted_rows(rows, predicted, main)
+        write_predicted_csv(out / "predicted.csv", compared)
+        log_predicted(compared)
+        md += predicted_markdown(compared, main)
+        summary += "\n\n" + (error_summary(compared) if compared else
+                               "Predicted recall: no placement to compare (none made of candidates on clean test images)")
     with atomic_path(out / "tables.md") as tmp:
         tmp.write_text(md)
     curves = recall_curves(rows, scene_name, ts0, main, ks)

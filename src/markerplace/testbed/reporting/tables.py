@@ -117,7 +117,8 @@ def _group(rows: Iterable[dict]) -> dict:
     return out
 
 
-def _methods(rows: Sequence[dict]) -> list[str]:
+def ordered_methods(rows: Sequence[dict]) -> list[str]:
+    """The methods of ``rows`` but ``none``, in table order (module docstring)."""
     present = {r["method"] for r in rows if r["method"] != NO_MARKERS}
     ordered = [m for m in PLACEMENT_METHODS if m in present]
     return ordered + sorted(present - set(ordered))
@@ -130,7 +131,7 @@ def method_table(rows: Sequence[dict], test_set: str, threshold: str, ks: Sequen
     recall in percent, ``mean ± std`` over runs.
     """
     groups = _group(rows)
-    methods = _methods(rows)
+    methods = ordered_methods(rows)
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     lines = ["| Scene (no markers) | Method | " + " | ".join(f"k={k}" for k in ks) + " |",
              "|---|---|" + "---|" * len(ks)]
@@ -156,7 +157,7 @@ def thresholds_table(rows: Sequence[dict], thresholds: Sequence[str], ks: Sequen
     """Markdown table of every (scene, test set, [condition,] method, threshold): k = 0 (no
     markers) then ks (the condition column only when some row has one, :func:`has_conditions`)."""
     groups = _group(rows)
-    methods = _methods(rows)
+    methods = ordered_methods(rows)
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     test_sets = list(dict.fromkeys(image_set(r) for r in rows))
     cond = has_conditions(rows)
@@ -200,7 +201,7 @@ def conditions_table(rows: Sequence[dict], threshold: str, ks: Sequence[int]) ->
              "|---|---|---|---|" + "---|" * len(conds)]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for ts in dict.fromkeys(r["test_set"] for r in rows):
-            for m, k in [("none", 0)] + [(m, k) for m in _methods(rows) for k in ks]:
+            for m, k in [("none", 0)] + [(m, k) for m in ordered_methods(rows) for k in ks]:
                 cells = [format_mean_std(groups.get((scene, set_name(ts, c), threshold, m, k), [])) for c in conds]
                 lines.append(f"| {md_text(scene)} | {ts} | {md_name(m)} | {k} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -223,7 +224,7 @@ def recall_curves(rows: Sequence[dict], scene: str, test_set: str, threshold: st
     base = groups.get((scene, test_set, threshold, "none", 0), [])
     base_mean = 100.0 * float(np.mean(base)) if base else np.nan
     curves = {}
-    for m in _methods(rows):
+    for m in ordered_methods(rows):
         means, stds, multi = [base_mean], [0.0], False
         for k in ks:
             vals = 100.0 * np.asarray(groups.get((scene, test_set, threshold, m, k), [np.nan]), dtype=float)
