@@ -383,7 +383,7 @@ NO_FLAG: dict[str, str] = {
                                   "diagnostics) or varies it itself (--vs, --shifts, --scales, --no-detection-study)"
        for path in ("test.tests", "test.sets", "test.conditions", "study.methods", "study.runs", "study.tag_scale", "study.shift",
                     "study.tag_ids", "localization.localizer", "localization.use_tags", "localization.tag_corners",
-                    "diagnostics.ceiling", "diagnostics.calibration")},
+                    "diagnostics.ceiling", "diagnostics.calibration", "diagnostics.predicted")},
 }
 """Config fields of ``plan``/``evaluate`` that have no flag, with the reason (``path@command``:
 only in that command). Every field not listed here and not listed by :data:`NO_FLAG_SECTIONS`
