@@ -92,12 +92,29 @@ def test_culled_renders_equal_whole_renders(make_scene):
     assert scene.num_faces >= MIN_TRIANGLES
     with Renderer(scene, cull=False) as whole, Renderer(scene) as culled:
         assert culled._scene_draws[0].chunks is not None and whole._scene_draws[0].chunks is None
+        occlusion = culled._scene_draws[0].occlusion
+        tested, hidden = [], []
+        test = occlusion.passed
+
+        def counting(fbo, cam_from_world, ids):
+            passed = test(fbo, cam_from_world, ids)
+            tested.append(len(ids))
+            hidden.append(int((~passed).sum()))
+            return passed
+
+        occlusion.passed = counting
         for pose in _poses():
             a, b = whole.render(pose), culled.render(pose)
             np.testing.assert_array_equal(a.rgb, b.rgb)
             np.testing.assert_array_equal(a.depth, b.depth)
             np.testing.assert_array_equal(a.normal, b.normal)
             assert (a.depth > 0).mean() > 0.5  # the view sees the room
+        # the occlusion queries ran, and seen from outside (the last pose) the near wall hides
+        # most of what lies behind it
+        assert sum(tested) > 0 and sum(hidden) > 0
+        tested.clear(), hidden.clear()
+        culled.render(_poses()[-1])
+        assert sum(hidden) > 0.5 * sum(tested), (tested, hidden)
 
 
 def test_culling_drops_what_a_view_cannot_see():

@@ -32,8 +32,8 @@ import numpy as np
 
 from markerplace.geometry import Intrinsics
 
-__all__ = ["CHUNK_TRIANGLES", "MIN_TRIANGLES", "MARGIN_PX", "ChunkedTriangles", "chunk_triangles",
-           "frustum_planes", "visible_ranges"]
+__all__ = ["CHUNK_TRIANGLES", "MIN_TRIANGLES", "MARGIN_PX", "ChunkedTriangles", "chunk_triangles", "chunk_ranges",
+           "frustum_planes", "visible_chunks", "visible_ranges"]
 
 CHUNK_TRIANGLES = 1024
 """Triangles per chunk: about 1,100 chunks for a million-triangle scan (the per-view box test
@@ -125,9 +125,8 @@ def frustum_planes(intrinsics: Intrinsics, near: float, far: float, margin_px: f
     ])
 
 
-def visible_ranges(chunks: ChunkedTriangles, cam_from_world: np.ndarray, planes_cam: np.ndarray) -> list[tuple[int, int]]:
-    """Vertex ranges ``(first, count)`` to draw for one view: the chunks whose box is not wholly
-    outside a frustum plane, consecutive ones merged.
+def visible_chunks(chunks: ChunkedTriangles, cam_from_world: np.ndarray, planes_cam: np.ndarray) -> np.ndarray:
+    """(V,) int64 indices, ascending, of the chunks whose box is not wholly outside a frustum plane.
 
     Args:
         chunks: from :func:`chunk_triangles`.
@@ -139,12 +138,24 @@ def visible_ranges(chunks: ChunkedTriangles, cam_from_world: np.ndarray, planes_
     centre = (chunks.box_min + chunks.box_max) / 2.0
     half = (chunks.box_max - chunks.box_min) / 2.0
     reach = centre @ n.T + half @ np.abs(n).T + d  # (C, 6): the box's farthest point along each normal
-    visible = np.flatnonzero((reach >= 0.0).all(axis=1))
-    if len(visible) == 0:
+    return np.flatnonzero((reach >= 0.0).all(axis=1))
+
+
+def chunk_ranges(chunks: ChunkedTriangles, indices: np.ndarray) -> list[tuple[int, int]]:
+    """Draw ranges ``(first, count)`` of the chunks ``indices`` (ascending), consecutive chunks
+    merged into one range."""
+    indices = np.asarray(indices, dtype=np.int64)
+    if len(indices) == 0:
         return []
-    breaks = np.flatnonzero(np.diff(visible) > 1)
-    run_start = np.concatenate([[visible[0]], visible[breaks + 1]])
-    run_end = np.concatenate([visible[breaks], [visible[-1]]])
+    breaks = np.flatnonzero(np.diff(indices) > 1)
+    run_start = np.concatenate([[indices[0]], indices[breaks + 1]])
+    run_end = np.concatenate([indices[breaks], [indices[-1]]])
     first = chunks.first_vertex[run_start]
     last = chunks.first_vertex[run_end] + chunks.n_vertices[run_end]
     return [(int(f), int(e - f)) for f, e in zip(first, last)]
+
+
+def visible_ranges(chunks: ChunkedTriangles, cam_from_world: np.ndarray, planes_cam: np.ndarray) -> list[tuple[int, int]]:
+    """Vertex ranges ``(first, count)`` to draw for one view: :func:`visible_chunks`, merged by
+    :func:`chunk_ranges`."""
+    return chunk_ranges(chunks, visible_chunks(chunks, cam_from_world, planes_cam))

@@ -12,7 +12,8 @@ GL texture and one vertex buffer); base colour and vertex colour are baked into 
 colour; meshes are de-indexed so parts without normals get exact flat face normals. A group of
 at least :data:`~markerplace.render.culling.MIN_TRIANGLES` triangles (a scan; no built-in scene
 has one) is instead sorted into spatial chunks and each view draws only the chunks that meet its
-frustum (:mod:`markerplace.render.culling`), through an index buffer when its parts have
+frustum (:mod:`markerplace.render.culling`) and are not hidden behind nearer ones (occlusion
+queries, :mod:`markerplace.render.draws`), through an index buffer when its parts have
 per-vertex normals; the images are those of the whole buffer (``Renderer(cull=False)``; tested
 pixel for pixel), except where two surfaces tie in depth at a pixel centre. Markers are
 extra textured quads (tag image with white quiet zone, nearest-neighbour magnification) lifted
@@ -44,9 +45,10 @@ import numpy as np
 from markerplace.geometry import Intrinsics, invert
 from markerplace.markers import Marker
 from markerplace.scene.types import MeshPart, Scene
-from markerplace.render.culling import MIN_TRIANGLES, ChunkedTriangles, chunk_triangles, frustum_planes, visible_ranges
+from markerplace.render.culling import chunk_ranges, frustum_planes, visible_chunks
+from markerplace.render.draws import Draw, OcclusionTest, by_distance, scene_buffers
 from markerplace.render.gl_resources import FAR, NEAR, build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
-from markerplace.render.vertices import indexed_part_vertices, marker_vertices, part_vertices
+from markerplace.render.vertices import marker_vertices, part_vertices
 
 log = logging.getLogger(__name__)
 
@@ -103,52 +105,6 @@ class RenderResult:
     world_from_cam: np.ndarray
 
 
-@dataclass(frozen=True, eq=False)
-class _Draw:
-    """One draw of the renderer: a texture, a vertex buffer, ``n`` corners (vertices, or index
-    entries when ``ibo`` is set), and the spatial chunks of a culled draw (None: drawn whole)."""
-
-    texture: object
-    vbo: object
-    n: int
-    chunks: ChunkedTriangles | None = None
-    ibo: object = None
-
-
-def _scene_buffers(ctx, parts: Sequence[MeshPart], cull: bool) -> tuple:
-    """GL buffers of the opaque parts sharing one texture: ``(vbo, n, chunks, ibo)`` of a
-    :class:`_Draw`. Small groups (and every group with ``cull`` off) are one de-indexed buffer
-    drawn whole; a large group is culled (:mod:`markerplace.render.culling`), indexed when every
-    part has per-vertex normals (llvmpipe then shades each vertex once, not once per corner: the
-    same images, about a third faster on a scan)."""
-    n_triangles = sum(len(p.faces) for p in parts)
-    if not cull or n_triangles < MIN_TRIANGLES:
-        data = np.concatenate([part_vertices(p) for p in parts])
-        return ctx.buffer(data.tobytes()), len(data), None, None
-    if all(p.normals is not None for p in parts):
-        records, faces, offset = [], [], 0
-        for p in parts:
-            rec, f = indexed_part_vertices(p)
-            records.append(rec)
-            faces.append(f + offset)
-            offset += len(rec)
-        data, faces = np.concatenate(records), np.concatenate(faces)
-        chunks = chunk_triangles(data["pos"][faces])
-        # vertices renumbered in order of first use, so a chunk's triangles index a compact range
-        faces = faces[chunks.order].reshape(-1)
-        used, first_use = np.unique(faces, return_index=True)
-        by_first_use = used[np.argsort(first_use, kind="stable")]
-        new_index = np.empty(len(data), np.int64)
-        new_index[by_first_use] = np.arange(len(by_first_use))
-        index = new_index[faces].astype(np.uint32)
-        data = data[by_first_use]
-        return ctx.buffer(data.tobytes()), index.size, chunks, ctx.buffer(index.tobytes())
-    data = np.concatenate([part_vertices(p) for p in parts])
-    chunks = chunk_triangles(data["pos"].reshape(-1, 3, 3))
-    data = data.reshape(-1, 3)[chunks.order].reshape(-1)
-    return ctx.buffer(data.tobytes()), len(data), chunks, None
-
-
 class Renderer:
     """Offscreen renderer of one scene; one GL context, scene uploaded once.
 
@@ -162,10 +118,10 @@ class Renderer:
         mipmaps: build mipmaps for scene textures (trilinear minification) when True.
         anisotropy: max anisotropic filtering of scene textures (1.0 = off; it is very slow on
             llvmpipe).
-        cull: draw only the parts of large buffers (at least
-            :data:`~markerplace.render.culling.MIN_TRIANGLES` triangles, e.g. a scan) that meet
-            the view frustum (:mod:`markerplace.render.culling`; the images are the same, about
-            five times faster on a million-triangle scan); False draws every triangle.
+        cull: draw only what a view of a large buffer (at least
+            :data:`~markerplace.render.culling.MIN_TRIANGLES` triangles, e.g. a scan) can show:
+            the chunks in its frustum and not hidden (:mod:`markerplace.render.draws`); the same
+            images, two to three times faster on a scan. False draws every triangle.
     """
 
     def __init__(
@@ -233,12 +189,15 @@ class Renderer:
             return uploaded[key]
 
         self._frustum = frustum_planes(self.intrinsics, NEAR, FAR)
-        self._scene_draws = [_Draw(texture_of(key), *_scene_buffers(ctx, parts, self._cull))
-                             for key, parts in groups.items()]
-        self._glass_draws = []  # (_Draw, (3,) centroid)
+        self._scene_draws = []
+        for key, parts in groups.items():
+            vbo, n, chunks, ibo = scene_buffers(ctx, parts, self._cull)
+            occlusion = OcclusionTest(ctx, chunks, self._proj) if chunks is not None else None
+            self._scene_draws.append(Draw(texture_of(key), vbo, n, chunks, ibo, occlusion))
+        self._glass_draws = []  # (Draw, (3,) centroid)
         for key, data in glass:
             centroid = data["pos"].astype(np.float64).mean(axis=0)
-            self._glass_draws.append((_Draw(texture_of(key), ctx.buffer(data.tobytes()), len(data)), centroid))
+            self._glass_draws.append((Draw(texture_of(key), ctx.buffer(data.tobytes()), len(data)), centroid))
         self._glass_fbo = ctx.framebuffer(color_attachments=[self._tex_rgb], depth_attachment=self._zbuf)
         self._glass_fbo.depth_mask = False
         self._tag_textures: dict[int, object] = {}
@@ -272,7 +231,7 @@ class Renderer:
         self._marker_draws = []
         for m in markers:
             data = marker_vertices(m)
-            self._marker_draws.append(_Draw(self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
+            self._marker_draws.append(Draw(self._tag_texture(int(m.tag_id)), self.ctx.buffer(data.tobytes()), len(data)))
         self.markers = tuple(markers)
 
     def set_lighting(self, lighting: Lighting | None) -> None:
@@ -299,7 +258,7 @@ class Renderer:
             self._fbos[outputs] = fbo
         return fbo
 
-    def _vao(self, kind: str, index: int, draw: "_Draw", prog, outputs):
+    def _vao(self, kind: str, index: int, draw: Draw, prog, outputs):
         key = (kind, index, outputs)
         vao = self._vaos.get(key)
         if vao is None:
@@ -353,14 +312,13 @@ class Renderer:
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         for kind, draws in (("scene", self._scene_draws), ("marker", self._marker_draws)):
             for i, draw in enumerate(draws):
-                ranges = [(0, draw.n)] if draw.chunks is None else visible_ranges(draw.chunks, cam_from_world, self._frustum)
-                if not ranges:
-                    continue
                 if outputs[0]:
                     draw.texture.use(0)
                 vao = self._vao(kind, i, draw, prog, outputs + (prog.glo,))
-                for first, count in ranges:
-                    vao.render(vertices=count, first=first)
+                if draw.chunks is None:
+                    vao.render(vertices=draw.n)
+                else:
+                    self._draw_chunks(draw, vao, fbo, cam_from_world, T[:3, 3])
         if outputs[0] and self._glass_draws:
             self._draw_glass(T)
         W, H = self._size
@@ -378,6 +336,16 @@ class Renderer:
             out_normal = np.empty((H, W, 3), np.float32)
             fbo.read_into(out_normal, components=3, attachment=att, dtype="f4")
         return RenderResult(out_rgb, out_depth, out_normal, T.copy())
+
+    def _draw_chunks(self, draw: Draw, vao, fbo, cam_from_world: np.ndarray, eye: np.ndarray) -> None:
+        """Draw the chunks of a culled draw that the view needs: those in the frustum, in rounds
+        nearest first, each after the first only where its occlusion query passes (:mod:`.draws`)."""
+        rounds = by_distance(draw.chunks, visible_chunks(draw.chunks, cam_from_world, self._frustum), eye)
+        for i, ids in enumerate(rounds):
+            if i and len(ids):
+                ids = ids[draw.occlusion.passed(fbo, cam_from_world, ids)]
+            for first, count in chunk_ranges(draw.chunks, ids):
+                vao.render(vertices=count, first=first)
 
     def _draw_glass(self, world_from_cam: np.ndarray) -> None:
         """Blend the transparent parts into the RGB attachment, far to near, without depth writes."""
