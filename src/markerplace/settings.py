@@ -340,6 +340,11 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                                    "reuses every cached stage and renders nothing"),
              "--paper": ("a4", "paper of `tags.pdf`: `a4`, `letter`, `a3` (a tag larger than the page is tiled) or "
                                "`none` (one page per tag at its own size)"),
+             "--with-map": ("off", "also extract the evaluation's marker-free map (OpenCV-default SIFT and tags) "
+                                   "from observe's renders, so that a later `evaluate --plan` renders no map image "
+                                   "(observe takes longer, see docs/results/benchmarks.md); always on with "
+                                   "expected-recall, --target-recall or --recall-curve, whose calibration needs "
+                                   "the map"),
              **_COMMON_RUN_OPTIONS},
     "evaluate": {**_SCENE_RUN_OPTIONS,
                  "scene": ("required unless `--plan`", "a built-in scene name or a mesh file; with `--plan` left out "

@@ -92,8 +92,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan`, then what it wrote."""
-    inputs = PlanInputs(existing=args.existing, exclude=args.exclude, where=args.where, paper=args.paper, force=args.force,
-                        adopt=args.adopt, progress=not args.quiet)
+    inputs = PlanInputs(existing=args.existing, exclude=args.exclude, where=args.where, paper=args.paper,
+                        with_map=args.with_map, force=args.force, adopt=args.adopt, progress=not args.quiet)
     scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
     result = run_plan(plan_config_from_args(args), scene, args.out, inputs)
     print(f"wrote {args.out}/placement.json, placement.csv, tags/*.svg, tags.pdf, tagmaps/, scores.npz, scores.png, "
@@ -167,6 +167,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_plan.add_argument("--paper", default="a4", type=str.lower, choices=PAPER_CHOICES,
                         help="paper of tags.pdf: tags larger than it are tiled with overlap strips and alignment marks; "
                              "none = one page per tag at its own size (default a4)")
+    p_plan.add_argument("--with-map", action="store_true",
+                        help="also extract the evaluation's marker-free map (OpenCV-default SIFT and tags) from "
+                             "observe's renders, so that a later `evaluate --plan` renders no map image (observe "
+                             "takes longer); always on with expected-recall, --target-recall or "
+                             "--recall-curve, whose calibration needs the map")
     add_plan_args(p_plan)
     p_plan.set_defaults(func=cmd_plan)
 

@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.localization.features import extract_sift, lift_to_3d
+from markerplace.localization.features import SiftConfig, extract_sift, lift_to_3d
 from markerplace.markers import Marker
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import ImageFeatures
@@ -75,10 +75,11 @@ class ImagingEngine:
             self._markers = key
         return self.renderer.render(world_from_cam, rgb=rgb, depth=True, normal=False)
 
-    def features(self, result, tags: bool = False) -> ImageFeatures:
-        """SIFT of a render, each keypoint lifted to 3D by the rendered depth (NaN beyond
-        ``max_depth`` or at depth edges); with ``tags``, the detected tag36h11 tags too."""
-        kp, desc = extract_sift(result.rgb, self.config.sift)
+    def features(self, result, tags: bool = False, sift: SiftConfig | None = None) -> ImageFeatures:
+        """SIFT of a render (the engine's preset, or ``sift``), each keypoint lifted to 3D by the
+        rendered depth (NaN beyond ``max_depth`` or at depth edges); with ``tags``, the detected
+        tag36h11 tags too."""
+        kp, desc = extract_sift(result.rgb, self.config.sift if sift is None else sift)
         pts, valid = lift_to_3d(kp, result.depth, self.K, result.world_from_cam, max_depth=self.config.max_depth)
         pts = np.where(valid[:, None], pts, np.nan)
         ids = np.zeros(0, np.int32)

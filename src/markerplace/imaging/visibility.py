@@ -18,7 +18,10 @@ import numpy as np
 from markerplace.geometry import project_with_depth_lookup
 from markerplace.tagfamily import outer_size
 
-__all__ = ["marker_points", "markers_unoccluded", "markers_in_view"]
+__all__ = ["MARKER_SAMPLES", "marker_points", "markers_unoccluded", "markers_in_view", "select_in_view"]
+
+MARKER_SAMPLES = "marker_samples.npy"
+"""File next to a stored (N, C) in-view mask: the (C, S, 3) sample points of its C markers."""
 
 _CENTRE_CORNERS = np.array([[0, 0, 0], [-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]], dtype=float) / 2.0
 
@@ -78,3 +81,20 @@ def markers_in_view(depth: np.ndarray, world_from_cam: np.ndarray, K: np.ndarray
     near = (z > 1e-3) & (u > -0.5 - margin_px) & (u < W - 0.5 + margin_px) & (v > -0.5 - margin_px) & (v < H - 0.5 + margin_px)
     hidden = near & (surface > 0) & (surface < z - tolerance)
     return (near & ~hidden).any(axis=1)
+
+
+def select_in_view(mask: np.ndarray, stored_samples: np.ndarray, samples: np.ndarray) -> np.ndarray | None:
+    """The (N, U) in-view mask of the markers sampled by ``samples`` (U, S, 3), read from a
+    stored (N, C) ``mask`` of the markers sampled by ``stored_samples`` (C, S, 3), or None when
+    some marker's samples are not among the stored ones bit for bit (then the mask must be
+    computed). :func:`markers_in_view` decides each marker from its own samples alone, so an
+    equal row gives an equal column."""
+    stored = np.ascontiguousarray(stored_samples, np.float64)
+    rows = {stored[c].tobytes(): c for c in range(len(stored))}
+    want = np.ascontiguousarray(samples, np.float64)
+    if want.shape[1:] != stored.shape[1:] and len(want):
+        return None
+    cols = [rows.get(want[u].tobytes()) for u in range(len(want))]
+    if any(c is None for c in cols):
+        return None
+    return np.asarray(mask, bool)[:, np.asarray(cols, np.int64)].reshape(len(mask), len(want))

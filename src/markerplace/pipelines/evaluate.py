@@ -120,7 +120,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     with make_executor(plan_config.runtime) as executor:
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
-                       k=max(config.study.ks), where=where)
+                       k=max(config.study.ks), where=where, map_cache=cache_dir, map_imaging=imaging_config)
         models = config.study.methods + ((RECALL_MODEL,) if diag.predicted else ())  # --predicted: the plans' model
         calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, models, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)

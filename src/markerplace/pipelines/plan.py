@@ -30,7 +30,8 @@ from markerplace.plan.discretize.exclusion import (apply_exclusion, describe_cha
 from markerplace.plan.discretize.stage import run_discretize
 from markerplace.plan.observe import run_observe
 from markerplace.plan.place.greedy import check_k
-from markerplace.plan.place.predicted import model_methods, place_for_target, predicted_recall, score_bound
+from markerplace.plan.place.predicted import (model_methods, place_for_target, predicted_recall, score_bound,
+                                              wants_success_model)
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity
@@ -44,6 +45,7 @@ from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, world_offset
 from markerplace.testbed.calibration import calibrate_plan
+from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_config
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +54,8 @@ __all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan"]
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, existing: Sequence[Marker] = (),
             progress: bool = True, executor=None, k: int | None = None,
-            before_observe: Callable[[Discretization], None] | None = None, where: Where | None = None) -> PlanData:
+            before_observe: Callable[[Discretization], None] | None = None, where: Where | None = None,
+            map_cache: str | Path | None = None, map_imaging=None) -> PlanData:
     """Discretize, observe, count look-alikes and score (each reused from ``run_dir`` when fresh).
 
     Args:
@@ -69,6 +72,10 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
         where: the ``--where`` file (:mod:`markerplace.plan.where`, user frame): the returned
             data's ``pose_weight``, computed (and a file that holds no pose refused) right after
             discretize, before anything renders. No cached stage depends on it.
+        map_cache: a testbed cache folder (:mod:`markerplace.testbed.map_setup`): when observe
+            runs, its renders also give the testbed's marker-free map features there, so the
+            map is not rendered again (None: not).
+        map_imaging: the testbed's imaging settings (None: the plan's camera, OpenCV SIFT).
     """
     run_dir = Path(run_dir)
     run_folder.make_dirs(run_dir)
@@ -84,9 +91,12 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
                                    np.array([m.world_from_marker for m in existing]).reshape(-1, 4, 4)])
     sizes = [config.placement.tag_size] * len(disc.candidate_world_from_marker) + [m.size for m in existing]
     in_view = geometric_visibility(disc.world_from_cam, marker_poses, config.imaging.camera, config.noise.max_range)
+    map_output = None if map_cache is None else observed_map_output(scene, disc.world_from_cam, map_cache, config,
+                                                                    map_imaging)
     obs, obs_key = run_observe(scene_spec, disc.world_from_cam, disc_key, marker_poses, sizes, in_view,
                                config.imaging, run_dir, executor, config.runtime, timings, progress,
-                               before=None if before_observe is None else lambda: before_observe(disc))
+                               before=None if before_observe is None else lambda: before_observe(disc),
+                               map_output=map_output)
     n_similar = run_similarity(obs.descriptors, obs.points_world, obs_key, run_dir, config.similarity,
                                config.placement.similarity, timings, progress)
     data = score_poses(disc, obs, n_similar, marker_poses, sizes, in_view, len(existing),
@@ -104,6 +114,9 @@ class PlanInputs:
         where: ``--where`` file of the places and directions of use (:mod:`markerplace.plan.where`),
             or None (every camera pose weighs the same).
         paper: paper of ``tags.pdf`` (``--paper``).
+        with_map: observe also writes the testbed's marker-free map features (``--with-map``),
+            so that ``evaluate --plan`` renders no map image; always on when the plan fits the
+            success model (its calibration needs the map).
         force: run even when the run-size guard says it is too large (``--force``).
         adopt: use an output folder markerplace did not make (``--adopt``).
         progress: progress bars.
@@ -113,6 +126,7 @@ class PlanInputs:
     exclude: str | None = None
     where: str | None = None
     paper: str = "a4"
+    with_map: bool = False
     force: bool = False
     adopt: bool = False
     progress: bool = True
@@ -154,10 +168,13 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     existing = markers_to_internal(existing, offset)
     check_markers_on_walls(scene, existing, f"--existing {inputs.existing}")
     run_config = check_first_guess(config, scene, inputs.force)  # also moves --start into the scene frame
+    with_map = inputs.with_map or wants_success_model(config.placement)
     with make_executor(run_config.runtime) as executor:
-        size_check = measured_size_check(scene, scene_spec, run_config, k, force=inputs.force)
+        size_check = measured_size_check(scene, scene_spec, run_config, k, force=inputs.force,
+                                         map_sift=testbed_imaging_config(run_config).sift if with_map else None)
         data = prepare(scene_spec, run_config, out, existing, inputs.progress, executor,
-                       None if target is not None else k, size_check, where)
+                       None if target is not None else k, size_check, where,
+                       map_cache=out / "calibration" if with_map else None)
         if target is None:
             check_k(k, data.num_candidates)  # before calibrating for nothing
         calibrate_plan(scene_spec, data, run_config, out, executor, model_methods(config.placement),

@@ -215,9 +215,11 @@ class PoseSample:
         return self.render_seconds + self.feature_seconds
 
 
-def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSES) -> PoseSample:
+def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSES, map_sift=None) -> PoseSample:
     """Render and extract features at ``n`` poses spread over ``world_from_cam`` ((N, 4, 4)) in
-    this process, as a worker of the observe stage does (OpenCV on one thread), and time it."""
+    this process, as a worker of the observe stage does (OpenCV on one thread), and time it;
+    with ``map_sift`` (a SIFT preset), the testbed's map features (that preset and the tags)
+    too, as observe extracts them for ``plan --with-map``."""
     import cv2
 
 
@@ -235,6 +237,8 @@ def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSE
             res = engine.render(poses[i])
             t2 = time.perf_counter()
             f = engine.features(res).with_3d_only()
+            if map_sift is not None:
+                engine.features(res, tags=True, sift=map_sift)
             render.append(t2 - t1)
             feature.append(time.perf_counter() - t2)
             feats.append(len(f.keypoints))
@@ -269,14 +273,14 @@ def estimate_plan(sample: PoseSample, poses: int, workers: int, similarity_confi
 
 
 def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = False, evaluate_config=None,
-                        extra_placements: int = 0):
+                        extra_placements: int = 0, map_sift=None):
     """The check ``prepare`` runs once the discretization is known and before it renders: a
-    :func:`time_sample` of the scene's own poses, the stage times of :func:`estimate_plan` (plus
-    the evaluation's, for ``evaluate``) logged, and :func:`check_run_size` on them. Returns the
-    callable ``check(disc)``."""
+    :func:`time_sample` of the scene's own poses (``map_sift``: with the map features observe
+    also extracts), the stage times of :func:`estimate_plan` (plus the evaluation's, for
+    ``evaluate``) logged, and :func:`check_run_size` on them. Returns the callable ``check(disc)``."""
     def check(disc) -> None:
         N = len(disc.world_from_cam)
-        sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging)
+        sample = time_sample(scene_spec, disc.world_from_cam, plan_config.imaging, map_sift=map_sift)
         workers = default_workers(plan_config.runtime.workers)
         tags = min(k, len(disc.candidate_world_from_marker))  # a --target-recall plan's k is only a bound
         stages = estimate_plan(sample, N, workers, plan_config.similarity, tags, plan_config.placement.similarity)

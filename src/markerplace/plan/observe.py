@@ -7,6 +7,13 @@ the keypoints that have a 3D point (within ``max_depth``), and the per-pose extr
 pose i (tested only where the candidate is geometrically in view; see
 :func:`markerplace.imaging.visibility.markers_unoccluded`).
 
+With a :class:`MapOutput`, every render also gives the testbed's marker-free map image (its own
+SIFT preset and the tags, 3D points only, and the (N, M) ``marker_in_view`` extra: which of the
+markers could change the image, :func:`markerplace.imaging.visibility.markers_in_view`), written
+into a second feature folder: ``evaluate`` (and the calibration of a success model) then reuses
+the render instead of rendering the pose again. The renders are deterministic, so those features
+are the ones the testbed would make itself (tests/plan/test_observe_map.py compares them).
+
 The work runs on an executor (:mod:`markerplace.runtime.executor`: in process, local processes
 or a Dask cluster), one imaging engine per worker, results streamed to disk in parts (an
 interrupted run resumes from them).
@@ -16,6 +23,7 @@ from __future__ import annotations
 
 import logging
 from contextlib import nullcontext
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -24,31 +32,64 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from markerplace.imaging.visibility import marker_points
+from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
+from markerplace.runtime.atomic_io import write_npy
 from markerplace.runtime.executor import RuntimeConfig, make_executor
 from markerplace.runtime.stages import cached
 from markerplace.tagfamily import DRAWING_VERSION
 
 log = logging.getLogger(__name__)
 
-__all__ = ["observe", "run_observe"]
+__all__ = ["MapOutput", "observe", "run_observe"]
 
 
-def _observe_task(engine, item) -> ImageFeatures:
-    """(world_from_cam, candidate mask) -> the pose's 3D features and candidate occlusion."""
-    world_from_cam, candidate_mask = item
+@dataclass(frozen=True)
+class MapOutput:
+    """Where and how observe also writes the testbed's marker-free map features.
+
+    Attributes:
+        folder: the map's feature folder (the testbed's ``map_base/features``).
+        key: the cache key the testbed gives those features
+            (:func:`markerplace.testbed.images.base_features_key`); the folder is marked done
+            with it.
+        config: the testbed's imaging settings: the same camera and depth settings as
+            observe's, its own SIFT preset (refused otherwise: the render would differ).
+    """
+
+    folder: Path
+    key: str
+    config: ImagingConfig
+
+
+def _observe_task(engine, item):
+    """(world_from_cam, candidate mask, map SIFT preset or None, observations wanted) -> the
+    pose's 3D features and candidate occlusion; with a preset, a pair: those (None when not
+    wanted) and the map image's features (tags and the ``marker_in_view`` extra included)."""
+    world_from_cam, candidate_mask, map_sift, with_obs = item
     res = engine.render(world_from_cam)
-    feats = engine.features(res).with_3d_only()
-    unoccluded = engine.unoccluded(res, "candidates", candidate_mask)
-    return ImageFeatures(feats.keypoints, feats.descriptors, feats.points_world,
-                         extras={"candidate_unoccluded": unoccluded})
+    obs = None
+    if with_obs:
+        feats = engine.features(res).with_3d_only()
+        obs = ImageFeatures(feats.keypoints, feats.descriptors, feats.points_world,
+                            extras={"candidate_unoccluded": engine.unoccluded(res, "candidates", candidate_mask)})
+    if map_sift is None:
+        return obs
+    m = engine.features(res, tags=True, sift=map_sift).with_3d_only()
+    return obs, ImageFeatures(m.keypoints, m.descriptors, m.points_world, m.tag_ids, m.tag_corners,
+                              {"marker_in_view": engine.in_view(res, "quads")})
+
+
+def _check_map_output(map_output: MapOutput, config: ImagingConfig) -> None:
+    if replace(map_output.config, sift=config.sift) != config:
+        raise ValueError("observe: the map's imaging settings differ from observe's beyond the SIFT preset")
 
 
 def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarray,
             candidate_world_from_marker: np.ndarray, tag_sizes, config: ImagingConfig, executor,
-            folder: str | Path, key: str = "", progress: bool = True) -> FeatureSet:
+            folder: str | Path, key: str = "", progress: bool = True,
+            map_output: MapOutput | None = None, observations: bool = True) -> FeatureSet | None:
     """Render and extract features at every pose into the FeatureSet folder ``folder``.
 
     Args:
@@ -64,27 +105,51 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
             reused.
         key: identity of these inputs (parts written for other inputs are dropped).
         progress: a progress bar.
+        map_output: also write the testbed's map features there (None: not); its
+            ``marker_in_view`` extra is over the same C markers, drawn as their whole quads
+            (``config.visibility_grid``). Skipped when that folder is already fresh.
+        observations: False: only the map features (``folder`` untouched; returns None), for
+            a plan whose observations are cached.
     """
     N, C = len(world_from_cam), len(candidate_world_from_marker)
-    samples = marker_points(candidate_world_from_marker, tag_sizes) if C else np.zeros((0, 5, 3))
-    job = imaging_job(EngineSpec(scene_spec, config, {"candidates": samples}))
-    writer = FeatureWriter(folder, N, key)
-    done = writer.done()
-    todo = [i for i in range(N) if i not in done]
-    if done:
-        log.info("observe: resuming, %d of %d poses already done", len(done), N)
+    samples = {"candidates": marker_points(candidate_world_from_marker, tag_sizes) if C else np.zeros((0, 5, 3))}
+    if map_output is not None and cache.is_fresh(map_output.folder, map_output.key):
+        map_output = None
+    if map_output is not None:
+        _check_map_output(map_output, config)
+        grid = map_output.config.visibility_grid
+        samples["quads"] = marker_points(candidate_world_from_marker, tag_sizes, grid=grid) if C \
+            else np.zeros((0, grid * grid, 3))
+    job = imaging_job(EngineSpec(scene_spec, config, samples))
+    writers = [FeatureWriter(folder, N, key) if observations else None]
+    if map_output is not None:
+        writers.append(FeatureWriter(map_output.folder, N, map_output.key))
+    done = [set(range(N)) if w is None else w.done() for w in writers]
+    todo = [i for i in range(N) if not all(i in d for d in done)]
+    if N - len(todo):
+        log.info("observe: resuming, %d of %d poses already done", N - len(todo), N)
     mask = candidate_in_view if C else np.zeros((N, 0), bool)
-    items = [(world_from_cam[i], mask[i]) for i in todo]
-    with progress_bar(N, "observe", "pose", progress, initial=len(done)) as bar:
-        for j, feats in executor.map(_observe_task, items, job):
-            writer.add(todo[j], feats)
+    map_sift = None if map_output is None else map_output.config.sift
+    items = [(world_from_cam[i], mask[i], map_sift, i not in done[0]) for i in todo]
+    with progress_bar(N, "observe" if observations else "map (no markers)", "pose", progress,
+                      initial=N - len(todo)) as bar:
+        for j, result in executor.map(_observe_task, items, job):
+            for writer, d, feats in zip(writers, done, result if map_output is not None else (result,)):
+                if todo[j] not in d:
+                    writer.add(todo[j], feats)
             bar.update()
-    return writer.finish()
+    if map_output is not None:
+        writers[1].finish()
+        write_npy(map_output.folder / MARKER_SAMPLES, samples["quads"])
+        cache.mark_done(map_output.folder, map_output.key)
+        log.info("observe: the testbed's marker-free map features written to %s", map_output.folder)
+    return None if writers[0] is None else writers[0].finish()
 
 
 def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_poses: np.ndarray, sizes: list,
                 in_view: np.ndarray, config: ImagingConfig, run_dir: Path, executor, runtime: RuntimeConfig,
-                timings: dict, progress: bool = True, before: Callable[[], None] | None = None) -> tuple[FeatureSet, str]:
+                timings: dict, progress: bool = True, before: Callable[[], None] | None = None,
+                map_output: MapOutput | None = None) -> tuple[FeatureSet, str]:
     """The observe stage of a run folder: ``run_dir/observations/``, reused while the
     discretization (its key and file digest), the imaging settings, the tag drawing and the
     marker poses and sizes are unchanged; an interrupted stage resumes from its parts.
@@ -95,6 +160,9 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
         in_view: (N, M) bool geometric visibility (only those are tested for occlusion).
         executor: where the work runs; None: one made from ``runtime`` when the stage runs.
         before: called when the stage must run, before anything renders (the run-size check).
+        map_output: the testbed's map features written from the same renders when the stage
+            runs (:func:`observe`), or rendered for alone when the stage is cached and they are
+            not; not part of the stage's key.
 
     Returns:
         (the features, the stage's cache key).
@@ -106,11 +174,16 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
         log.info("observe: rendering and extracting SIFT at %d poses", len(world_from_cam))
         with make_executor(runtime) if executor is None else nullcontext(executor) as ex:
             return observe(scene_spec, world_from_cam, in_view, marker_poses, np.asarray(sizes, float), config, ex,
-                           run_dir / "observations", key, progress=progress)
+                           run_dir / "observations", key, progress=progress, map_output=map_output)
 
     if before is not None and not cache.is_fresh(run_dir / "observations", key):
         before()
     obs = cached("observe", run_dir / "observations", key, compute, None, FeatureSet.load, timings)
+    if map_output is not None and not cache.is_fresh(map_output.folder, map_output.key):
+        log.info("observe: cached; rendering the %d poses again for the map features", len(world_from_cam))
+        with make_executor(runtime) if executor is None else nullcontext(executor) as ex:
+            observe(scene_spec, world_from_cam, in_view, marker_poses, np.asarray(sizes, float), config, ex,
+                    run_dir / "observations", key, progress=progress, map_output=map_output, observations=False)
     log.info("observe: %d features with 3D points (%.0f per pose)", len(obs.image_index),
              len(obs.image_index) / max(len(world_from_cam), 1))
     return obs, key

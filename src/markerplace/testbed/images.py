@@ -20,7 +20,7 @@ import numpy as np
 
 from markerplace.imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from markerplace.imaging.visibility import marker_points
+from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points, select_in_view
 from markerplace.runtime.atomic_io import write_npy
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
@@ -29,7 +29,7 @@ from markerplace.testbed.conditions import QueryCondition, render_query
 
 log = logging.getLogger(__name__)
 
-__all__ = ["TestbedImaging", "BaseImages"]
+__all__ = ["TestbedImaging", "BaseImages", "base_features_key"]
 
 
 def _render_task(engine: ImagingEngine, item) -> ImageFeatures:
@@ -133,6 +133,14 @@ def _item(world_from_cam: np.ndarray, markers: list, map_only: bool, condition: 
     return base if condition is None else base + (condition.image(index),)
 
 
+def base_features_key(key: str, map_only: bool, config) -> str:
+    """Cache key of the marker-free features of the image set named by ``key`` (scene, poses),
+    3D points only or not, made with the :class:`~markerplace.imaging.config.ImagingConfig`
+    ``config``: the one :class:`BaseImages` checks, and the one ``observe`` marks the map
+    features it writes with (:class:`markerplace.plan.observe.MapOutput`)."""
+    return cache.hash_of("base-features-v2", key, map_only, config)
+
+
 PART_SIZE = 64
 """Images per part file of a marker-free stage: an interrupted stage loses at most this many."""
 
@@ -160,7 +168,7 @@ class BaseImages:
         self.part_size = int(part_size)
         N = len(world_from_cam)
         self.condition = condition
-        feat_key = cache.hash_of("base-features-v2", key, map_only, imaging.config)
+        feat_key = base_features_key(key, map_only, imaging.config)
         mask_key = cache.hash_of(feat_key, imaging.samples, imaging.config.visibility_margin_px,
                                  imaging.config.occlusion_tolerance)
         feat_dir, mask_path = self.folder / "features", self.folder / "in_view.npy"
@@ -180,6 +188,9 @@ class BaseImages:
             cache.mark_done(feat_dir, feat_key)
         if mask is None:
             mask = cache.load_fresh(mask_path, mask_key, lambda p: np.load(p, allow_pickle=False))
+        observed = feats.extras.pop("marker_in_view", None)  # features made by observe (plan/observe.py)
+        if mask is None and observed is not None:
+            mask = _observed_mask(observed, feat_dir, imaging.samples, name)
         if mask is None:  # features cached, markers changed: depth-only renders
             mask = self._depth_mask(imaging, mask_key, name)
         if not cache.is_fresh(mask_path, mask_key):
@@ -206,6 +217,18 @@ class BaseImages:
         mask = np.array(writer.finish().extras["in_view"]).reshape(N, -1)
         run_folder.remove_tree(work)
         return mask
+
+
+def _observed_mask(stored: np.ndarray, feat_dir: Path, samples: np.ndarray, name: str) -> np.ndarray | None:
+    """The (N, U) in-view mask of the union markers sampled by ``samples``, from the (N, C)
+    ``marker_in_view`` extra that ``observe`` stores with the map features it writes, or None
+    when it does not cover every union marker."""
+    if not (feat_dir / MARKER_SAMPLES).exists():
+        return None
+    mask = select_in_view(stored, np.load(feat_dir / MARKER_SAMPLES, allow_pickle=False), samples)
+    if mask is None:
+        log.info("%s: a marker is not among the candidates observe tested: marker visibility from depth renders", name)
+    return mask
 
 
 def _resume(writer: FeatureWriter, n: int, desc: str) -> list[int]:

@@ -8,6 +8,7 @@ once.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -19,12 +20,15 @@ from markerplace.imaging.config import SIFT_DEFAULT
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
-from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.plan.observe import MapOutput
+from markerplace.testbed.images import BaseImages, TestbedImaging, base_features_key
 from markerplace.testbed.predict import ImageSet, PredictContext
 from markerplace.localization.vlad import VladCodebook
 
-__all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "vlad_codebook",
-           "marker_free_images"]
+log = logging.getLogger(__name__)
+
+__all__ = ["testbed_imaging_config", "localizer_spec", "map_base_key", "map_images", "observed_map_output",
+           "vlad_codebook", "marker_free_images"]
 
 
 def testbed_imaging_config(plan_config, imaging_config=None):
@@ -49,6 +53,21 @@ def map_base_key(scene, map_poses: np.ndarray) -> str:
 def map_images(tb: TestbedImaging, map_poses: np.ndarray, cache_dir: Path, base_key: str) -> BaseImages:
     """Marker-free map features (3D points only) and in-view masks, in ``cache_dir/map_base``."""
     return BaseImages(tb, np.asarray(map_poses, float), Path(cache_dir) / "map_base", base_key, True, "map")
+
+
+def observed_map_output(scene, map_poses: np.ndarray, cache_dir: str | Path, plan_config,
+                        imaging_config=None) -> MapOutput | None:
+    """Where ``observe`` writes the marker-free map features of :func:`map_images` in
+    ``cache_dir`` from its own renders at the (N, 4, 4) ``map_poses`` (the discretization's
+    poses), under the key :func:`map_images` checks; None (with a log line) when the testbed's
+    imaging (:func:`testbed_imaging_config`) renders otherwise than the plan's observe (another
+    camera or depth setting): then the map renders itself."""
+    imaging, observe_imaging = testbed_imaging_config(plan_config, imaging_config), plan_config.imaging
+    if replace(imaging, sift=observe_imaging.sift) != observe_imaging:
+        log.info("observe: the testbed's imaging differs from the plan's beyond SIFT: the map renders on its own")
+        return None
+    key = base_features_key(map_base_key(scene, map_poses), True, imaging)
+    return MapOutput(Path(cache_dir) / "map_base" / "features", key, imaging)
 
 
 def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages, num_clusters: int, seed: int,
