@@ -109,13 +109,12 @@ STAGES = {
     "plan observe, in this process": (["plan", "tiny", "-k", "3", "--yaws", "4", "--workers", "1"], OBSERVE, 1.0),
     "plan observe, Dask local:2": (["plan", "tiny", "-k", "3", "--yaws", "4", "--cluster", "local:2"], OBSERVE, 1.5),
     "plan look-alike search": (["plan", "tiny", "-k", "3", "--workers", "2"], "counting look-alikes", 0.5),
-    "evaluate map stage": (["--verbose", "evaluate", "tiny", *EVAL, "--workers", "2"], "map (no markers): starting", 1.0),
+    "evaluate observe and map stage": (["--verbose", "evaluate", "tiny", *EVAL, "--workers", "2"], OBSERVE, 1.0),
     "evaluate test stage": (["--verbose", "evaluate", "tiny", *EVAL, "--workers", "2"],
                             "queries weighted (no markers): starting", 0.5),
-    "evaluate on Dask local:2": (["--verbose", "evaluate", "tiny", *EVAL, "--cluster", "local:2"],
-                                 "map (no markers): starting", 1.0),
+    "evaluate on Dask local:2": (["--verbose", "evaluate", "tiny", *EVAL, "--cluster", "local:2"], OBSERVE, 1.0),
     "study": (["--verbose", "study", "tiny", "--tests", "20", "--k", "2", *FAST, "--workers", "2", "--vs", "50",
-               "--shifts", "0.1", "--scales", "0.5"], "map (no markers): starting", 1.0),
+               "--shifts", "0.1", "--scales", "0.5"], OBSERVE, 1.0),
 }
 
 
@@ -153,13 +152,14 @@ def test_a_resumed_plan_is_the_plan_of_an_uninterrupted_run(tmp_path):
 
 @pytest.mark.slow
 def test_a_resumed_evaluate_map_stage_renders_only_the_missing_images(tmp_path):
-    """Ctrl-C during evaluate's marker-free map stage (248 poses on the default lattice), then
-    the same command: the log says how many map images the parts kept, only the rest are
-    rendered, and the outputs equal an uninterrupted run's."""
+    """Ctrl-C while evaluate makes its marker-free map (in its observe stage, from the same
+    renders; 248 poses on the default lattice), then the same command: the log says how many
+    poses the parts kept, only the rest are rendered, and the outputs equal an uninterrupted
+    run's."""
     argv = ["evaluate", "tiny", "--tests", "20", "--k", "2", "--runs", "1", "--methods", "none,omp", "--test-sets",
             "weighted", "--workers", "2"]
     folder = tmp_path / "a" / "cache" / "map_base" / "features" / "parts"
-    r = interrupt_cli(["--verbose", *argv, "--out", str(tmp_path / "a")], "map (no markers): starting", delay=0.0,
+    r = interrupt_cli(["--verbose", *argv, "--out", str(tmp_path / "a")], OBSERVE, delay=0.0,
                       until=lambda: any(folder.glob("part_*.npz")))
     _assert_stopped(r)
     parts = list(folder.glob("part_*.npz"))
@@ -170,7 +170,7 @@ def test_a_resumed_evaluate_map_stage_renders_only_the_missing_images(tmp_path):
                              capture_output=True, text=True, env=ENV, timeout=900)
         assert res.returncode == 0, res.stderr
         logs[name] = res.stderr
-    assert f"map (no markers): resuming, {64 * len(parts)} of " in logs["a"], logs["a"][-3000:]
+    assert f"observe: resuming, {64 * len(parts)} of " in logs["a"], logs["a"][-3000:]
     assert "resuming" not in logs["b"]
     for out in ("recall.csv", "tables.md"):
         assert (tmp_path / "a" / out).read_bytes() == (tmp_path / "b" / out).read_bytes(), out

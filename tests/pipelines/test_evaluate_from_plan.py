@@ -41,8 +41,16 @@ def test_evaluate_from_a_plan_reuses_its_stages_and_equals_a_fresh_evaluation(pl
     ref = tmp_path / "ref"
     assert main(["evaluate", "tiny", "--out", str(ref), "--k", "2", *EVAL, *FAST_2_YAWS]) == 0
     before = _snapshot(plan)
-    for module, name in ((observe, "observe"), (discretize_stage, "discretize"), (similarity_stage, "count_similar")):
+    for module, name in ((discretize_stage, "discretize"), (similarity_stage, "count_similar")):
         monkeypatch.setattr(module, name, _refuse)
+    real_observe = observe.observe
+
+    def map_only(*args, **kwargs):  # the plan made no map (no --with-map): observe renders it, nothing else
+        if kwargs.get("observations", True):
+            _refuse()
+        return real_observe(*args, **kwargs)
+
+    monkeypatch.setattr(observe, "observe", map_only)
     out = tmp_path / "from_plan"
     assert main(["evaluate", "--plan", str(plan), "--out", str(out), *EVAL, *RUN]) == 0  # k: the plan's
     assert _snapshot(plan) == before  # the plan folder is only read
