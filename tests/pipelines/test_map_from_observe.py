@@ -35,9 +35,10 @@ def _count_renders(monkeypatch) -> list:
     return calls
 
 
-def _map_renders(calls: list, run_dir) -> int:
-    """Renders without markers (RGB or depth only) at the map's poses (the discretization's)."""
-    poses = np.load(run_dir / "plan" / "discretization.npz")["world_from_cam"]
+def _map_renders(calls: list, discretization) -> int:
+    """Renders without markers (RGB or depth only) at the map's poses (those of the
+    ``discretization.npz`` file)."""
+    poses = np.load(discretization)["world_from_cam"]
     keys = {p.tobytes() for p in np.asarray(poses, float)}
     return sum(1 for pose, markers, _ in calls if not markers and pose.tobytes() in keys)
 
@@ -51,12 +52,12 @@ def test_evaluate_renders_each_map_pose_once_and_equals_the_rendered_map(tmp_pat
     shared = tmp_path / "shared"
     assert main(["evaluate", "tiny", "--out", str(shared), *EVAL, *FAST_2_YAWS]) == 0
     N = len(np.load(shared / "plan" / "discretization.npz")["world_from_cam"])
-    assert _map_renders(calls, shared) == N > 0  # observe's renders, which also gave the map
+    assert _map_renders(calls, shared / "plan" / "discretization.npz") == N > 0  # observe's renders, which also gave the map
     calls.clear()
     monkeypatch.setattr(plan_pipeline, "observed_map_output", lambda *a, **k: None)  # the testbed renders it
     rendered = tmp_path / "rendered"
     assert main(["evaluate", "tiny", "--out", str(rendered), *EVAL, *FAST_2_YAWS]) == 0
-    assert _map_renders(calls, rendered) >= 2 * N  # observe, then the map (and its in-view masks)
+    assert _map_renders(calls, rendered / "plan" / "discretization.npz") >= 2 * N  # observe, then the map (and its in-view masks)
     a = FeatureSet.load(shared / "cache" / "map_base" / "features")
     b = FeatureSet.load(rendered / "cache" / "map_base" / "features")
     for name in FeatureSet.FIELDS:
@@ -69,32 +70,20 @@ def test_evaluate_renders_each_map_pose_once_and_equals_the_rendered_map(tmp_pat
     assert _rows(shared) == _rows(rendered)
 
 
-def test_evaluate_after_plan_with_map_renders_no_map_image(run_plan, tmp_path, monkeypatch):
-    plain = run_plan(2, options=FAST_2_YAWS)
-    with_map = run_plan(2, options=[*FAST_2_YAWS, "--with-map"], folder="plan_with_map")
-    assert (with_map / "calibration" / "map_base" / "features" / "descriptors.npy").exists()
-    assert not (plain / "calibration").exists()
-    calls = _count_renders(monkeypatch)
-    out = tmp_path / "plain"
-    assert main(["evaluate", "--plan", str(plain), "--out", str(out), *EVAL, *RUN]) == 0
-    N = len(np.load(out / "plan" / "discretization.npz")["world_from_cam"])
-    assert _map_renders(calls, out) == N > 0  # a plan without --with-map: the map is rendered, once
-    calls.clear()
-    out = tmp_path / "with_map"
-    assert main(["evaluate", "--plan", str(with_map), "--out", str(out), *EVAL, *RUN]) == 0
-    assert _map_renders(calls, out) == 0 and len(calls) > 0  # test images and tags only
-    assert _rows(out) == _rows(tmp_path / "plain")
-    assert (with_map / "placement.json").read_bytes() == (plain / "placement.json").read_bytes()
-
-
-def test_plan_with_map_on_a_cached_plan_adds_the_map(run_plan, monkeypatch):
-    plan = run_plan(2, options=FAST_2_YAWS)
+def test_plan_with_map_then_evaluate_plan_renders_no_map_image(run_plan, tmp_path, monkeypatch):
+    plan = run_plan(2, options=FAST_2_YAWS)  # a plain plan: no map
+    assert not (plan / "calibration").exists()
+    before = (plan / "placement.json").read_bytes()
     calls = _count_renders(monkeypatch)
     assert main(["plan", "tiny", "-k", "2", "--out", str(plan), *FAST_2_YAWS, "--with-map"]) == 0
     assert (plan / "calibration" / "map_base" / "features" / "descriptors.npy").exists()
-    poses = np.load(plan / "discretization.npz")["world_from_cam"]
-    keys = {p.tobytes() for p in np.asarray(poses, float)}
-    assert sum(1 for pose, markers, rgb in calls if not markers and rgb and pose.tobytes() in keys) >= len(poses)
+    N = len(np.load(plan / "discretization.npz")["world_from_cam"])
+    assert _map_renders(calls, plan / "discretization.npz") == N  # cached observe: the map's renders only
+    assert (plan / "placement.json").read_bytes() == before
+    calls.clear()
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--plan", str(plan), "--out", str(out), *EVAL, *RUN]) == 0
+    assert _map_renders(calls, out / "plan" / "discretization.npz") == 0 and len(calls) > 0  # test images only
 
 
 def test_in_view_columns_are_read_only_for_the_markers_observe_sampled():
