@@ -6,6 +6,7 @@ Prints ``name: value`` lines: per scene the estimated and measured seconds and t
 (goal: within 2x either way, README), plus the estimate's parts.
 
     .venv/bin/python benchmarks/run_estimate.py [--scenes room,house,house-scan] [--work out/bench_estimate]
+    .venv/bin/python benchmarks/run_estimate.py --scenes campus --args="--grid-spacing 1.0"  # 12,464 poses
 
 ``house-scan`` is ``scene export house --as-scan`` (cached in ``--work``), planned with ``--up z``.
 """
@@ -57,6 +58,7 @@ def main() -> int:
     ap.add_argument("--scenes", default="room,house,house-scan")
     ap.add_argument("--work", default="out/bench_estimate")
     ap.add_argument("-k", type=int, default=10)
+    ap.add_argument("--args", default="", help="more plan options for every scene, e.g. --args='--grid-spacing 1.0'")
     args = ap.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -69,7 +71,7 @@ def main() -> int:
         out = work / f"plan_{name}"
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.perf_counter()
-        run = subprocess.run([exe, "plan", *scene_args, "-k", str(args.k), "--out", str(out)],
+        run = subprocess.run([exe, "plan", *scene_args, "-k", str(args.k), "--out", str(out), *args.args.split()],
                              capture_output=True, text=True)
         measured = time.perf_counter() - t0
         if run.returncode != 0:

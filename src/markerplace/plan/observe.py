@@ -8,11 +8,11 @@ pose i (tested only where the candidate is geometrically in view; see
 :func:`markerplace.imaging.visibility.markers_unoccluded`).
 
 With a :class:`MapOutput`, every render also gives the testbed's marker-free map image (its own
-SIFT preset and the tags, 3D points only, and the (N, M) ``marker_in_view`` extra: which of the
-markers could change the image, :func:`markerplace.imaging.visibility.markers_in_view`), written
+SIFT preset and the tags, 3D points only, and the (N, C) ``marker_in_view`` extra: which of the
+candidates could change the image, :func:`markerplace.imaging.visibility.markers_in_view`), written
 into a second feature folder: ``evaluate`` (and the calibration of a success model) then reuses
 the render instead of rendering the pose again. The renders are deterministic, so those features
-are the ones the testbed would make itself (tests/plan/test_observe_map.py compares them).
+are the ones the testbed would make itself (tests/pipelines/test_map_from_observe.py compares them).
 
 The work runs on an executor (:mod:`markerplace.runtime.executor`: in process, local processes
 or a Dask cluster), one imaging engine per worker, results streamed to disk in parts (an
