@@ -43,28 +43,37 @@ def count_candidates(queries, lims, labels, sims, has_sims, points, X, raw, norm
             if not (dx * dx + dy * dy + dz * dz > min_d2):  # NaN points never count
                 near = True
                 continue
-            if _similar(q, j, e, sims, has_sims, X, raw, norm, cos_t, band, D):
+            s = sims[e] if has_sims else _cosine32(X, q, j, D)
+            if _similar(q, j, s, raw, norm, cos_t, band, D):
                 c += 1
         counts[k] = c
         f = c > 0
         if not f and near:
             for e in range(lims[k], lims[k + 1]):
                 j = labels[e]
-                if j != q and _similar(q, j, e, sims, has_sims, X, raw, norm, cos_t, band, D):
-                    f = True
-                    break
+                if j != q:
+                    s = sims[e] if has_sims else _cosine32(X, q, j, D)
+                    if _similar(q, j, s, raw, norm, cos_t, band, D):
+                        f = True
+                        break
         found[k] = f
 
 
-@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"}, inline="always")
-def _similar(q, j, e, sims, has_sims, X, raw, norm, cos_t, band, D):  # pragma: no cover - compiled
-    """Cosine of rows q and j > cos_t, decided exactly (float32 outside the band, else float64)."""
-    if has_sims:
-        s = sims[e]
-    else:
-        s = np.float32(0.0)
-        for t in range(D):
-            s += X[q, t] * X[j, t]
+# The helpers take only what they use: the first version passed every array to one helper
+# (inline="always") and the kernel ran 5-7x slower per candidate (measured, numba 0.68).
+@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"})
+def _cosine32(X, q, j, D):  # pragma: no cover - compiled
+    """float32 dot of the unit rows q and j of X."""
+    s = np.float32(0.0)
+    for t in range(D):
+        s += X[q, t] * X[j, t]
+    return s
+
+
+@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"})
+def _similar(q, j, s, raw, norm, cos_t, band, D):  # pragma: no cover - compiled
+    """Cosine of rows q and j > cos_t, given its float32 value ``s``: decided by ``s`` outside
+    the band, else in float64 from the raw descriptors."""
     if s > cos_t + band:
         return True
     if not (s > cos_t - band):
