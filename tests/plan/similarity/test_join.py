@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.plan.similarity.join import rank_cells
@@ -57,3 +58,43 @@ def test_expansion_reaches_every_cell_of_a_dense_group_without_double_counting()
         got = count_similar_ivf(D2, P2, SimilarityConfig(nlist=16, nprobe=2, nprobe_max=16, seed=1,
                                                          threads=threads))
         assert np.array_equal(got, exact)
+
+
+def test_block_kernel_decides_as_the_candidate_list_kernel():
+    """count_block (pairs in range taken from the product of the search vectors) against
+    count_candidates on FAISS's range-search list of the same block: same counts and found."""
+    import faiss
+
+    from markerplace.plan.similarity.kernel import count_block
+
+    D, P = synthetic_descriptors(3000, seed=4, dup_fraction=0.5, extent=5.0)
+    pairs = Pairs(D, P)
+    Y = pairs.X[:, :48].copy()  # any projection: both kernels get the same search vectors
+    q, m = np.arange(0, 3000, 2), np.arange(1, 3000, 3)
+    radius = 0.6
+    flat = faiss.IndexFlatL2(Y.shape[1])
+    flat.add(Y[m])
+    lims, _, labels = flat.range_search(Y[q], radius)
+    want_c, want_f = pairs.count(q, lims, None, m[labels], 0.9, 4.0)
+    assert want_c.sum() > 50 and 0 < want_f.sum() < len(q)
+    sq = np.einsum("ij,ij->i", Y, Y)
+    c, f = np.zeros(len(q), np.int64), np.zeros(len(q), bool)
+    count_block(q, m, Y[q] @ Y[m].T, sq[q], sq[m], radius, np.ones(len(q), bool), pairs.points, pairs.X,
+                pairs.raw, pairs.norm, 0.9, 1e-4, 4.0, c, f)
+    assert np.array_equal(c, want_c) and np.array_equal(f, want_f)
+
+
+def test_numpy_blas_threads_is_set_and_restored():
+    from markerplace.plan.similarity.search import numpy_blas_threads
+
+    A = np.random.default_rng(0).random((300, 64), dtype=np.float32)
+    want = A @ A.T
+    with numpy_blas_threads(3) as before:
+        if before is None:
+            pytest.skip("numpy's BLAS is not the wheels' OpenBLAS")
+        with numpy_blas_threads(1) as inside:
+            assert inside == 3
+            got = A @ A.T
+    with numpy_blas_threads(1) as after:
+        assert after == before
+    assert np.allclose(got, want, rtol=1e-5, atol=1e-5)

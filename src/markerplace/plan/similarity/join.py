@@ -1,17 +1,19 @@
 """The IVF look-alike search as cell-by-cell joins (used by :mod:`.stage`).
 
 :func:`join_probes` searches a list of (query, cell) probes grouped by cell: all queries that
-probe cell ``b`` are range-searched at once against ``b``'s members with a flat FAISS index (a
-small matrix product instead of one inverted-list scan per query), and their candidates are
-decided exactly (:meth:`.search.Pairs.count`). :func:`join_cells` runs it on every point's
+probe cell ``b`` are compared at once with ``b``'s members by one matrix product of their search
+vectors (BLAS, instead of one inverted-list scan per query), and the pairs within the search
+radius are decided exactly in the same pass (:func:`.kernel.count_block`, no candidate list).
+(A flat FAISS index's range search per cell did the same at 2-3x the time per pair: it builds
+a result list of every pair in range, and real SIFT points have hundreds per query.) :func:`join_cells` runs it on every point's
 ``nprobe`` nearest cells; :func:`expand_search` on further cells, ring by ring, for the points
 in dense groups of look-alikes. The rules (the ``BAND`` around the threshold, why counts never
 exceed the exact ones) are in :mod:`.stage`'s docstring.
 
-Threads: ``config.threads`` Python threads, each with single-threaded FAISS (OpenMP across two
-threads costs more than it gains on calls this small, most of all on a busy machine) and its own
-counts, summed at the end (integers, any order); each thread takes every ``T``-th cell, so no
-result depends on the thread count.
+Threads: ``config.threads`` Python threads, each with single-threaded FAISS and BLAS (a thread
+pool per call costs more than it gains on calls this small, most of all on a busy machine) and
+its own counts, summed at the end (integers, any order); each thread takes every ``T``-th cell,
+so no result depends on the thread count.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from typing import Callable
 import faiss
 import numpy as np
 
-from markerplace.plan.similarity.search import Searcher, resolve_threads
+from markerplace.plan.similarity.kernel import count_block
+from markerplace.plan.similarity.search import BAND, Searcher, numpy_blas_threads, resolve_threads
 
 __all__ = ["Cells", "expand_search", "join_cells", "join_probes", "rank_cells"]
 
@@ -60,12 +63,12 @@ def _in_threads(n_threads: int, work: Callable[[int], object]) -> list:
 
 def join_probes(searcher: Searcher, cells: Cells, probe_q: np.ndarray, probe_cell: np.ndarray,
                 report: np.ndarray | None, counts: np.ndarray,
-                tick: Callable[[int], None] | None = None) -> np.ndarray:
+                tick: Callable[[int], None] | None = None, block: int = 4096) -> np.ndarray:
     """Range-search every probe (query ``probe_q[i]`` in cell ``probe_cell[i]``); add to ``counts``.
 
     The same pairs as ``range_search_preassigned`` with these probes, but grouped by cell. Only
-    which candidates near the radius are returned can differ between the two (float rounding of
-    the distance), and those are never look-alikes (the radius has the ``BAND`` margin), so the
+    which pairs near the radius are in range can differ between the two (float rounding of the
+    distance), and those are never look-alikes (the radius has the ``BAND`` margin), so the
     counts are the same. A query must probe a cell at most once (else a pair counts twice).
 
     Args:
@@ -86,35 +89,38 @@ def join_probes(searcher: Searcher, cells: Cells, probe_q: np.ndarray, probe_cel
     probe_lims = np.searchsorted(probe_cell[order], np.arange(nlist + 1))
     n_threads = min(resolve_threads(cfg.threads), nlist)
 
+    pairs, sq = searcher.pairs, np.einsum("ij,ij->i", Y, Y)
+    need_all = np.ones(block, dtype=bool)
+
     def part(t: int, stop: threading.Event) -> tuple[np.ndarray, np.ndarray]:
         part_counts, part_found = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=bool)
-        flat = faiss.IndexFlatL2(Y.shape[1])
         for b in range(t, nlist, n_threads):
             if stop.is_set():
                 break
             if tick is not None:
                 tick(1)
             m = cells.members[cells.lims[b]:cells.lims[b + 1]]
-            pr = order[probe_lims[b]:probe_lims[b + 1]]
-            if len(m) == 0 or len(pr) == 0:
+            prs = order[probe_lims[b]:probe_lims[b + 1]]
+            if len(m) == 0 or len(prs) == 0:
                 continue
-            q = probe_q[pr]
-            flat.reset()
-            flat.add(Y[m])
-            lims, _, labels = flat.range_search(Y[q], searcher.radius)
-            c, f = searcher.pairs.count(q, lims, None, m[labels], cos_t, min_d2)
-            part_counts[q] += c  # a query probes a cell once: no repeated indices
-            if report is None:
-                part_found[q] |= f
-            else:
-                r = report[pr]
-                part_found[q[r]] |= f[r]
+            ym, m_sq = Y[m], sq[m]
+            for s in range(0, len(prs), block):  # bounds the (queries, members) block in memory
+                pr = prs[s:s + block]
+                q = probe_q[pr]
+                G = Y[q] @ ym.T  # BLAS; rounding only moves pairs at the radius, never look-alikes
+                c, f = np.zeros(len(q), dtype=np.int64), np.zeros(len(q), dtype=bool)
+                need = need_all[:len(q)] if report is None else report[pr]
+                count_block(q, m, G, sq[q], m_sq, searcher.radius, need, pairs.points, pairs.X, pairs.raw,
+                            pairs.norm, cos_t, BAND, min_d2, c, f)
+                part_counts[q] += c  # a query probes a cell once: no repeated indices
+                part_found[q[need]] |= f[need]
         return part_counts, part_found
 
     found = np.zeros(P, dtype=bool)
-    for part_counts, part_found in _in_threads(n_threads, part):
-        counts += part_counts
-        found |= part_found
+    with numpy_blas_threads(1):
+        for part_counts, part_found in _in_threads(n_threads, part):
+            counts += part_counts
+            found |= part_found
     return found
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["count_candidates"]
+__all__ = ["count_block", "count_candidates"]
 
 
 @numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"})
@@ -56,6 +56,45 @@ def count_candidates(queries, lims, labels, sims, has_sims, points, X, raw, norm
                     if _similar(q, j, s, raw, norm, cos_t, band, D):
                         f = True
                         break
+        found[k] = f
+
+
+@numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc", "nsz"})
+def count_block(queries, members, G, q_sq, m_sq, radius, need, points, X, raw, norm, cos_t, band, min_d2,
+                counts, found):  # pragma: no cover - compiled
+    """:func:`count_candidates` on a dense block, without a candidate list: the candidates of
+    query ``queries[k]`` are the ``members[b]`` whose search vectors are nearer than ``radius``
+    (squared): ``q_sq[k] + m_sq[b] - 2 G[k, b] < radius``, ``G`` the (Q, M) inner products of
+    the search vectors and ``q_sq``, ``m_sq`` their squared norms. ``found[k]`` is computed only
+    where ``need[k]`` (else it is: a far look-alike was counted).
+    """
+    D = X.shape[1]
+    for k in range(len(queries)):
+        q = queries[k]
+        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        c = 0
+        near = False
+        for b in range(len(members)):
+            if not (q_sq[k] + m_sq[b] - 2.0 * G[k, b] < radius):
+                continue
+            j = members[b]
+            if j == q:
+                continue
+            dx, dy, dz = points[j, 0] - px, points[j, 1] - py, points[j, 2] - pz
+            if not (dx * dx + dy * dy + dz * dz > min_d2):  # NaN points never count
+                near = True
+                continue
+            if _similar(q, j, _cosine32(X, q, j, D), raw, norm, cos_t, band, D):
+                c += 1
+        counts[k] = c
+        f = c > 0
+        if not f and near and need[k]:
+            for b in range(len(members)):
+                j = members[b]
+                if (q_sq[k] + m_sq[b] - 2.0 * G[k, b] < radius and j != q
+                        and _similar(q, j, _cosine32(X, q, j, D), raw, norm, cos_t, band, D)):
+                    f = True
+                    break
         found[k] = f
 
 
