@@ -45,15 +45,16 @@ class Cells:
         self.nlist = nlist
 
 
-def _in_threads(n_threads: int, work: Callable[[int], object]) -> list:
-    """``work(t)`` for t in 0..n_threads-1 on as many threads (each with one OpenMP thread)."""
+def _in_threads(n_threads: int, work: Callable[[int, threading.Event], object]) -> list:
+    """``work(t, stop)`` for t in 0..n_threads-1 on as many threads (each with one OpenMP
+    thread); ``stop`` is set when the caller is interrupted."""
     stop = threading.Event()  # set when the caller is interrupted: the threads end after their cell
 
     def run(t: int):
         faiss.omp_set_num_threads(1)  # this thread's OpenMP setting (FAISS and its OpenBLAS)
         return work(t, stop)
 
-    with ThreadPoolExecutor(n_threads) as pool:  # FAISS and the kernel release the GIL
+    with ThreadPoolExecutor(n_threads) as pool:  # FAISS, BLAS and the kernel release the GIL
         try:
             return list(pool.map(run, range(n_threads)))
         except BaseException:  # Ctrl-C: do not wait for every thread to finish its share
