@@ -19,13 +19,19 @@ Goals: recall >= 0.99 and speedup >= 5x at 1.8M points.
 Inputs: ``--points`` synthetic sizes (SIFT-like descriptors with planted look-alikes,
 ``synthetic_descriptors``, seed 0; default 437000,1800000) and ``--observations`` (real SIFT
 points of a plan run: an ``observations.h5`` or a feature folder with ``descriptors.npy`` and
-``points_world.npy``). ``--crossover`` times the exact path against the IVF path at smaller
+``points_world.npy``). With ``--observations`` the run also measures synthetic points of the
+same count (``synthetic_same``) and prints real against synthetic: ``real_over_synthetic_s``
+(wall) and ``_cpu``, against the goal (real within 2x, ``real_speed_ok``); ``--repeat N`` times
+``faiss`` N times on each, alternating real and synthetic (so a load that comes and goes hits
+both), and takes the median. ``--crossover`` times the exact path against the IVF path at smaller
 sizes (how ``exact_max_points`` was chosen). ``--threads N`` runs FAISS and the reference's BLAS
 on N threads (default: all CPUs).
 
     .venv/bin/python benchmarks/similarity.py --points 437000
     .venv/bin/python benchmarks/similarity.py --points 1800000 --sample 1000
     .venv/bin/python benchmarks/similarity.py --points 0 --observations out/office/observations
+    .venv/bin/python benchmarks/similarity.py --points 0 --no-reference --repeat 3 --observations out/office/observations
+    .venv/bin/python benchmarks/similarity.py --points 0 --no-reference --repeat 3 --threads 1 --observations out/office/observations
     .venv/bin/python benchmarks/similarity.py --points 0 --crossover 10000,25000,50000,100000
 """
 
@@ -46,6 +52,7 @@ def _args(argv=None) -> argparse.Namespace:
     ap.add_argument("--crossover", default="", help="sizes at which to time exact against ivf")
     ap.add_argument("--threads", type=int, default=0, help="FAISS and BLAS threads (0: all CPUs)")
     ap.add_argument("--no-reference", action="store_true", help="skip the pre-FAISS code")
+    ap.add_argument("--repeat", type=int, default=1, help="timed faiss runs on real and same-count synthetic")
     ap.add_argument("--seed", type=int, default=0)
     return ap.parse_args(argv)
 
@@ -66,6 +73,7 @@ from similarity_reference import ReferenceConfig, count_similar_reference  # noq
 GOAL_RECALL = 0.99
 GOAL_SPEEDUP = 5.0
 GOAL_SPEEDUP_AT = 1_800_000
+GOAL_REAL_OVER_SYNTHETIC = 2.0  # issue 37: real SIFT points within 2x of synthetic at the same count
 
 
 def emit(name: str, value) -> None:
@@ -96,8 +104,9 @@ def load_observations(path: str) -> tuple[np.ndarray, np.ndarray]:
     return D[ok], X[ok].astype(np.float64)
 
 
-def compare(tag: str, D: np.ndarray, X: np.ndarray, args) -> None:
-    """Time faiss and ref on (D, X) and measure both against exact counts of sampled queries."""
+def compare(tag: str, D: np.ndarray, X: np.ndarray, args) -> tuple[float, float]:
+    """Time faiss and ref on (D, X) and measure both against exact counts of sampled queries;
+    returns faiss's (wall, CPU) seconds."""
     P = len(D)
     emit(f"{tag}_points", P)
     cfg = SimilarityConfig(threads=args.threads)
@@ -133,6 +142,31 @@ def compare(tag: str, D: np.ndarray, X: np.ndarray, args) -> None:
         if P >= GOAL_SPEEDUP_AT:
             emit(f"{tag}_speedup_goal", GOAL_SPEEDUP)
             emit(f"{tag}_speedup_ok", speed >= GOAL_SPEEDUP)
+    return walls["faiss"]
+
+
+def real_against_synthetic(D: np.ndarray, X: np.ndarray, args) -> None:
+    """Real points against synthetic points of the same count: accuracy of each, then the
+    median of ``--repeat`` timed runs, alternating, and their ratio against the goal."""
+    P = len(D)
+    Ds, Xs = synthetic_descriptors(P, seed=args.seed)
+    first = {"real": compare("real", D, X, args), "synthetic_same": compare("synthetic_same", Ds, Xs, args)}
+    times = {k: [v] for k, v in first.items()}
+    cfg = SimilarityConfig(threads=args.threads)
+    for _ in range(args.repeat - 1):
+        for tag, (d, x) in (("real", (D, X)), ("synthetic_same", (Ds, Xs))):
+            _, wall, cpu = timed(count_similar, d, x, cfg)
+            times[tag].append((wall, cpu))
+    med = {k: np.median(np.array(v), axis=0) for k, v in times.items()}
+    for tag in times:
+        emit(f"{tag}_faiss_runs_s", " ".join(f"{w:.2f}" for w, _ in times[tag]))
+        emit(f"{tag}_faiss_median_s", float(med[tag][0]))
+        emit(f"{tag}_faiss_median_cpu_s", float(med[tag][1]))
+    ratio = float(med["real"][0] / med["synthetic_same"][0])
+    emit("real_over_synthetic_s", ratio)
+    emit("real_over_synthetic_cpu", float(med["real"][1] / med["synthetic_same"][1]))
+    emit("real_over_synthetic_goal", GOAL_REAL_OVER_SYNTHETIC)
+    emit("real_speed_ok", ratio <= GOAL_REAL_OVER_SYNTHETIC)
 
 
 def crossover(sizes: list[int], args) -> None:
@@ -161,9 +195,11 @@ def main(args) -> None:
         del D, X
     if args.observations:
         D, X = load_observations(args.observations)
-        compare("real", D, X, args)
+        real_against_synthetic(D, X, args)
     if args.crossover:
         crossover([int(s) for s in args.crossover.split(",")], args)
+    if hasattr(os, "getloadavg"):
+        emit("load_average_1min_at_end", os.getloadavg()[0])
 
 
 if __name__ == "__main__":

@@ -22,8 +22,8 @@ class SimilarityConfig:
             >= 0.99 at 437k and 1.8M synthetic points, ``benchmarks/similarity.py``); more =
             higher recall, slower.
         nprobe_max: a point whose farther half of the ``nprobe`` cells held a look-alike
-            candidate (any 3D distance) searches the next ``nprobe`` cells, then the next
-            ``2 nprobe``, ..., while the last ring still holds one, up to this many cells in all
+            candidate (any 3D distance) searches the next ``2 nprobe`` cells, and the next
+            ``2 nprobe`` again while the last ring still holds one, up to this many cells in all
             (default 128; ``nprobe_max <= nprobe`` turns this off). Dense groups of look-alikes
             (repeated texture) span many k-means cells; this finds them without raising
             ``nprobe`` for every point.

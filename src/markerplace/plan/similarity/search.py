@@ -2,17 +2,16 @@
 
 :class:`Pairs` holds the data every candidate pair is decided on and calls the compiled
 decision (:mod:`.kernel`); :class:`Searcher` runs a FAISS range search in batches and
-turns its candidates into counts; :func:`join_cells` searches the IVF cells one at a time, all
-queries of a cell at once; :func:`expand_search` searches further cells by doubling rings. The
+turns its candidates into counts (the exact search; the IVF search is in :mod:`.join`). The
 rules (the ``BAND`` around the threshold, why counts never exceed the exact ones) are in
 :mod:`.stage`'s docstring.
 """
 
 from __future__ import annotations
 
+import ctypes
+import glob
 import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Callable
 
@@ -22,7 +21,7 @@ import numpy as np
 from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.plan.similarity.kernel import count_candidates
 
-__all__ = ["BAND", "Pairs", "Searcher", "expand_search", "faiss_threads", "join_cells", "resolve_threads"]
+__all__ = ["BAND", "Pairs", "Searcher", "faiss_threads", "numpy_blas_threads", "resolve_threads"]
 
 # half-width of the band around the cosine threshold in which a pair's float32 cosine (from
 # FAISS) is not trusted and the cosine is recomputed in float64 (10x the float32 error bound)
@@ -46,6 +45,43 @@ def faiss_threads(n: int):
         yield
     finally:
         faiss.omp_set_num_threads(old)
+
+
+@contextmanager
+def numpy_blas_threads(n: int):
+    """Run numpy's OpenBLAS (the ``scipy_openblas`` of the numpy wheels) on ``n`` threads.
+
+    The cell joins multiply small matrices with numpy on several Python threads at once; each
+    product must stay on its own thread (an OpenBLAS thread pool per call, or two callers
+    waiting on one pool, cost 4x on a busy 2-core machine, measured). Found the way
+    threadpoolctl does, by the library's symbol; without it (another BLAS) nothing changes.
+    Yields the thread count before (None: no such library).
+    """
+    get = set_ = None
+    root = os.path.dirname(os.path.dirname(np.__file__))
+    for path in glob.glob(os.path.join(root, "numpy.libs", "*openblas*")) + glob.glob(
+            os.path.join(os.path.dirname(np.__file__), ".dylibs", "*openblas*")):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for prefix in ("scipy_openblas", "openblas"):
+            for suffix in ("64_", ""):
+                if hasattr(lib, f"{prefix}_set_num_threads{suffix}"):
+                    get = getattr(lib, f"{prefix}_get_num_threads{suffix}")
+                    set_ = getattr(lib, f"{prefix}_set_num_threads{suffix}")
+                    break
+            if set_ is not None:
+                break
+    if set_ is None:
+        yield None
+        return
+    old = int(get())
+    set_(int(n))
+    try:
+        yield old
+    finally:
+        set_(old)
 
 
 class Pairs:
@@ -113,14 +149,12 @@ class Searcher:
         self.index, self.pairs, self.vectors = index, pairs, vectors
         self.radius, self.cosines, self.config = radius, cosines, config
 
-    def search(self, queries: np.ndarray, probes: tuple[np.ndarray, np.ndarray] | None = None,
+    def search(self, queries: np.ndarray,
                tick: Callable[[int], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Range-search ``queries`` (global row indices) in batches; count look-alikes exactly.
 
         Args:
             queries: (Q,) row indices.
-            probes: for the IVF index, ((Q, k) int64 cells, (Q, k) float32 centroid distances):
-                the cells each query searches, -1 = none (``range_search_preassigned``).
             tick: called with the number of queries done after each batch (progress).
 
         Returns:
@@ -131,126 +165,13 @@ class Searcher:
         cos_t, min_d2 = float(cfg.cos_threshold), float(cfg.min_distance) ** 2
         out = np.zeros(len(queries), dtype=np.int64)
         found = np.zeros(len(queries), dtype=bool)
-        if probes is not None:
-            self.index.nprobe = probes[0].shape[1]
         for s in range(0, len(queries), cfg.batch):
             q = queries[s:s + cfg.batch]
             contiguous = q[-1] - q[0] + 1 == len(q)
             xq = self.vectors[q[0]:q[-1] + 1] if contiguous else self.vectors[q]
-            if probes is None:
-                lims, sims, labels = self.index.range_search(xq, self.radius)
-            else:
-                lims, sims, labels = self.index.range_search_preassigned(
-                    xq, self.radius, np.ascontiguousarray(probes[0][s:s + len(q)]),
-                    np.ascontiguousarray(probes[1][s:s + len(q)]))
+            lims, sims, labels = self.index.range_search(xq, self.radius)
             out[s:s + len(q)], found[s:s + len(q)] = self.pairs.count(
                 q, lims, sims if self.cosines else None, labels, cos_t, min_d2)
             if tick is not None:
                 tick(len(q))
         return out, found
-
-
-def expand_search(searcher: Searcher, quantizer, queries: np.ndarray, searched: np.ndarray, nprobe_max: int,
-                  counts: np.ndarray, tick: Callable[[int], None] | None = None) -> None:
-    """Search ``queries`` in further cells, by doubling rings: the nearest 2 n cells, then 4 n, ...
-    (n = ``searched.shape[1]``) up to ``nprobe_max``, while the last ring held a look-alike.
-
-    ``searched``: (Q, n) cells already searched. A cell is searched at most once per query (a
-    bitmap of visited cells, even if the quantizer ranks ties differently between calls), so no
-    pair is counted twice. Adds to ``counts``; ``tick(n)`` after each chunk of ``n`` queries.
-    """
-    nlist = searcher.index.nlist
-    chunk = max(1, (1 << 26) // nlist)  # visited bitmaps of at most 64 MB
-    for s in range(0, len(queries), chunk):
-        q = queries[s:s + chunk]
-        visited = np.zeros((len(q), nlist), dtype=bool)
-        visited[np.arange(len(q))[:, None], np.maximum(searched[s:s + chunk], 0)] = True
-        active = np.arange(len(q))
-        lo = searched.shape[1]
-        while lo < nprobe_max and len(active):
-            hi = min(2 * lo, nprobe_max)
-            dist, cells = quantizer.search(searcher.vectors[q[active]], hi)
-            rows, ok = active[:, None], cells >= 0
-            cells[~ok | visited[rows, np.maximum(cells, 0)]] = -1  # FAISS skips cells numbered -1
-            visited[rows, np.maximum(cells, 0)] |= cells >= 0
-            c, found = searcher.search(q[active], (cells, dist))
-            counts[q[active]] += c
-            active = active[found]
-            lo = hi
-        if tick is not None:
-            tick(len(q))
-
-
-def join_cells(searcher: Searcher, cells: np.ndarray, first: np.ndarray, h: int,
-               counts: np.ndarray, tick: Callable[[int], None] | None = None) -> np.ndarray:
-    """Range-search every point in its probed cells, one cell at a time; add to ``counts``.
-
-    The same pairs as ``range_search_preassigned`` with each point's ``cells``, but grouped by
-    cell: all queries that probe cell ``b`` are searched at once against ``b``'s members with a
-    flat FAISS index, whose range search is a matrix product (BLAS) instead of one list scan per
-    query. Only which candidates near the radius are returned can differ between the two (float
-    rounding of the distance), and those are never look-alikes (the radius has the ``BAND``
-    margin), so the counts are the same. ``config.threads`` threads take every ``T``-th cell,
-    each with single-threaded FAISS and its own counts (summed: integers, any order), so the
-    result does not depend on the thread count.
-
-    Args:
-        searcher: the IVF searcher (its ``vectors``, ``radius``, ``pairs`` and ``config``).
-        cells: (P, n) int64 cells of every point, nearest first (-1 = none).
-        first: (P,) the cell each point is filed in (``cells[:, 0]``).
-        h: probe ranks ``>= h`` are the farther cells whose look-alike candidates are reported.
-        counts: (P,) int64, incremented by each point's look-alike count.
-        tick: called with 1 after each cell, from the worker threads (progress; must be
-            thread-safe).
-
-    Returns:
-        (P,) bool: the point had a look-alike candidate (any 3D distance) in a cell of rank >= h.
-    """
-    cfg, Y = searcher.config, searcher.vectors
-    cos_t, min_d2 = float(cfg.cos_threshold), float(cfg.min_distance) ** 2
-    P, n = cells.shape
-    nlist = searcher.index.nlist
-    members = np.argsort(first, kind="stable")
-    member_lims = np.searchsorted(first[members], np.arange(nlist + 1))
-    flat_cells = cells.ravel()
-    probes = np.argsort(flat_cells, kind="stable")  # (point, rank) pairs by cell, points ascending
-    probe_lims = np.searchsorted(flat_cells[probes], np.arange(nlist + 1))
-    n_threads = min(resolve_threads(cfg.threads), nlist)
-
-    stop = threading.Event()  # set when the caller is interrupted: the threads end after their cell
-
-    def part(t: int) -> tuple[np.ndarray, np.ndarray]:
-        faiss.omp_set_num_threads(1)  # this thread's OpenMP setting (FAISS and its OpenBLAS)
-        part_counts, part_found = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=bool)
-        flat = faiss.IndexFlatL2(Y.shape[1])
-        for b in range(t, nlist, n_threads):
-            if stop.is_set():
-                break
-            m = members[member_lims[b]:member_lims[b + 1]]
-            pr = probes[probe_lims[b]:probe_lims[b + 1]]
-            if len(m) == 0 or len(pr) == 0:
-                if tick is not None:
-                    tick(1)
-                continue
-            if tick is not None:
-                tick(1)
-            q, rank = pr // n, pr % n
-            flat.reset()
-            flat.add(Y[m])
-            lims, _, labels = flat.range_search(Y[q], searcher.radius)
-            c, f = searcher.pairs.count(q, lims, None, m[labels], cos_t, min_d2)
-            part_counts[q] += c  # a point probes a cell once: no repeated indices
-            far = rank >= h
-            part_found[q[far]] |= f[far]
-        return part_counts, part_found
-
-    found_far = np.zeros(P, dtype=bool)
-    with ThreadPoolExecutor(n_threads) as pool:  # FAISS and the kernel release the GIL
-        try:
-            for part_counts, part_found in pool.map(part, range(n_threads)):
-                counts += part_counts
-                found_far |= part_found
-        except BaseException:  # Ctrl-C: do not wait for every thread to finish its share
-            stop.set()
-            raise
-    return found_far

@@ -27,20 +27,23 @@ Methods:
       equal float64 brute force. Used up to ``exact_max_points`` points (the measured crossover
       with ``ivf``, see ``benchmarks/similarity.py``).
     * ``ivf``: ``IndexIVFFlat`` (L2, on the ``pca_dims``-D projection) with ``nlist`` cells from
-      FAISS's k-means, trained on a seeded sample; each point is assigned once and searches its
-      ``nprobe`` nearest cells (one quantizer pass serves both ``add`` and the search); the
-      search runs cell by cell, all queries probing a cell against its members at once (a
-      matrix product, see :func:`.search.join_cells`), then FAISS's own preassigned range search for the
-      few points that search further. The only
+      FAISS's k-means, trained on a seeded sample; each point is filed in its nearest cell and
+      searches its ``nprobe`` nearest (one quantizer pass). The search runs cell by cell, all
+      queries probing a cell against its members at once (a small matrix product, see
+      :func:`.join.join_probes`). A point whose farther half of the ``nprobe`` cells held a
+      look-alike (a dense group of look-alikes that k-means split over many cells: repeated
+      texture, common in real SIFT) then searches further cells in rings of ``2 nprobe``
+      (:func:`.join.expand_search`), again cell by cell for all such points at once. The only
       approximation is the probe limit: a look-alike in a cell that was not searched is missed,
       so counts can only be too low, never too high. :func:`~markerplace.plan.similarity.quality.measure_error` reports how much.
     * ``auto``: ``exact`` up to ``exact_max_points`` points, else ``ivf``.
 
 Determinism: the training sample and FAISS's k-means are seeded from ``seed``; FAISS runs on
-``threads`` OpenMP threads (restored afterwards; the cell join on as many Python threads of one
+``threads`` OpenMP threads (restored afterwards; the cell joins on as many Python threads of one
 OpenMP thread each). Every stage the result depends on is
-thread-count independent (k-means centroids are summed per centroid in point order, inverted
-lists are filled in point order, each query's search is independent), which the tests check.
+thread-count independent (k-means centroids are summed per centroid in point order, cells are
+filled in point order, each query's search and ranking of cells is independent), which the
+tests check.
 """
 
 from __future__ import annotations
@@ -58,7 +61,8 @@ from markerplace.progress import progress_bar
 from markerplace.runtime import cache
 from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime.stages import cached
-from markerplace.plan.similarity.search import BAND, Pairs, Searcher, expand_search, faiss_threads, join_cells
+from markerplace.plan.similarity.join import Cells, expand_search, join_cells
+from markerplace.plan.similarity.search import BAND, Pairs, Searcher, faiss_threads
 
 log = logging.getLogger(__name__)
 
@@ -180,9 +184,8 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
         index.train(train)
         t1, c1 = time.perf_counter(), time.process_time()
         # one quantizer pass: the nearest cell files the point, the nprobe nearest are searched
-        _, cells = quantizer.search(Y, nprobe)
-        first = np.ascontiguousarray(cells[:, 0])  # named: swig_ptr does not keep the array alive
-        index.add_core(P, faiss.swig_ptr(Y), None, faiss.swig_ptr(first))
+        _, probed = quantizer.search(Y, nprobe)
+        cells = Cells(probed[:, 0], nlist)
         t2, c2 = time.perf_counter(), time.process_time()
         # unit vectors: cos > t - band <=> |x - y|^2 < 2 - 2 (t - band); the projection keeps
         # every such pair inside the radius (the band also covers float32 rounding)
@@ -198,15 +201,17 @@ def count_similar_ivf(descriptors: np.ndarray, points_world: np.ndarray,
                 with lock:
                     bar.update(n)
 
-            found_far = join_cells(searcher, cells, first, (nprobe + 1) // 2, counts, tick)
-        go_on = np.flatnonzero(found_far) if nprobe_max > nprobe else first[:0]
+            found_far = join_cells(searcher, cells, probed, (nprobe + 1) // 2, counts, tick)
+        go_on = np.flatnonzero(found_far) if nprobe_max > nprobe else np.zeros(0, np.int64)
+        t3, c3 = time.perf_counter(), time.process_time()
         if len(go_on):
             with progress_bar(len(go_on), "look-alikes (dense groups)", "pt", progress) as bar:
-                expand_search(searcher, quantizer, go_on, cells[go_on], nprobe_max, counts, bar.update)
+                expand_search(searcher, quantizer.reconstruct_n(0, nlist), cells, go_on, probed[go_on],
+                              nprobe_max, counts, bar.update)
     log.debug("similarity ivf: %d points, PCA %d, %d cells, nprobe %d, %d points searched further (max %d); "
-              "wall (CPU) seconds: train %.1f (%.1f), assign + add %.1f (%.1f), search %.1f (%.1f)",
+              "wall (CPU) seconds: train %.1f (%.1f), assign %.1f (%.1f), search %.1f (%.1f), further %.1f (%.1f)",
               P, d, nlist, nprobe, len(go_on), nprobe_max, t1 - t0, c1 - c0, t2 - t1, c2 - c1,
-              time.perf_counter() - t2, time.process_time() - c2)
+              t3 - t2, c3 - c2, time.perf_counter() - t3, time.process_time() - c3)
     return counts.astype(np.int32)
 
 
@@ -226,7 +231,7 @@ def run_similarity(descriptors: np.ndarray, points_world: np.ndarray, observe_ke
     if not enabled:
         timings["similarity"] = 0.0
         return np.zeros(len(points_world), dtype=np.int32)
-    key = cache.hash_of("similarity-v3", observe_key, cache.content_digest(run_dir / "observations"), config)
+    key = cache.hash_of("similarity-v4", observe_key, cache.content_digest(run_dir / "observations"), config)
     return cached("similarity", run_dir / "similarity.npz", key,
                   lambda: count_similar(descriptors, points_world, config, progress=progress),
                   lambda n, path: write_npz(path, n_similar=n),
