@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.plan.similarity.join import rank_cells
@@ -84,17 +83,23 @@ def test_block_kernel_decides_as_the_candidate_list_kernel():
     assert np.array_equal(c, want_c) and np.array_equal(f, want_f)
 
 
-def test_numpy_blas_threads_is_set_and_restored():
-    from markerplace.plan.similarity.search import numpy_blas_threads
+def test_blas_threads_are_set_and_restored():
+    from threadpoolctl import threadpool_info
+
+    from markerplace.plan.similarity.search import blas_threads
+
+    def blas():
+        return [(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]
 
     A = np.random.default_rng(0).random((300, 64), dtype=np.float32)
-    want = A @ A.T
-    with numpy_blas_threads(3) as before:
-        if before is None:
-            pytest.skip("numpy's BLAS is not the wheels' OpenBLAS")
-        with numpy_blas_threads(1) as inside:
-            assert inside == 3
+    want = A @ A.T  # numpy's BLAS is loaded
+    before = blas()
+    assert before
+    with blas_threads(3):
+        assert all(n == 3 for _, n in blas())
+        with blas_threads(1):
+            assert all(n == 1 for _, n in blas())
             got = A @ A.T
-    with numpy_blas_threads(1) as after:
-        assert after == before
+        assert all(n == 3 for _, n in blas())
+    assert blas() == before
     assert np.allclose(got, want, rtol=1e-5, atol=1e-5)

@@ -26,7 +26,7 @@ import faiss
 import numpy as np
 
 from markerplace.plan.similarity.kernel import count_block
-from markerplace.plan.similarity.search import BAND, Searcher, numpy_blas_threads, resolve_threads
+from markerplace.plan.similarity.search import BAND, Searcher, blas_threads, resolve_threads
 
 __all__ = ["Cells", "expand_search", "join_cells", "join_probes", "rank_cells"]
 
@@ -118,7 +118,7 @@ def join_probes(searcher: Searcher, cells: Cells, probe_q: np.ndarray, probe_cel
         return part_counts, part_found
 
     found = np.zeros(P, dtype=bool)
-    with numpy_blas_threads(1):
+    with blas_threads(1):
         for part_counts, part_found in _in_threads(n_threads, part):
             counts += part_counts
             found |= part_found

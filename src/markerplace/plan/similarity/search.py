@@ -9,19 +9,18 @@ rules (the ``BAND`` around the threshold, why counts never exceed the exact ones
 
 from __future__ import annotations
 
-import ctypes
-import glob
 import os
 from contextlib import contextmanager
 from typing import Callable
 
 import faiss
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.plan.similarity.kernel import count_candidates
 
-__all__ = ["BAND", "Pairs", "Searcher", "faiss_threads", "numpy_blas_threads", "resolve_threads"]
+__all__ = ["BAND", "Pairs", "Searcher", "blas_threads", "faiss_threads", "resolve_threads"]
 
 # half-width of the band around the cosine threshold in which a pair's float32 cosine (from
 # FAISS) is not trusted and the cosine is recomputed in float64 (10x the float32 error bound)
@@ -48,40 +47,16 @@ def faiss_threads(n: int):
 
 
 @contextmanager
-def numpy_blas_threads(n: int):
-    """Run numpy's OpenBLAS (the ``scipy_openblas`` of the numpy wheels) on ``n`` threads.
+def blas_threads(n: int):
+    """Run the BLAS libraries of this process (numpy's OpenBLAS, FAISS's) on ``n`` threads,
+    restored afterwards (threadpoolctl).
 
     The cell joins multiply small matrices with numpy on several Python threads at once; each
     product must stay on its own thread (an OpenBLAS thread pool per call, or two callers
-    waiting on one pool, cost 4x on a busy 2-core machine, measured). Found the way
-    threadpoolctl does, by the library's symbol; without it (another BLAS) nothing changes.
-    Yields the thread count before (None: no such library).
+    waiting on one pool, cost 4x on a busy 2-core machine, measured).
     """
-    get = set_ = None
-    root = os.path.dirname(os.path.dirname(np.__file__))
-    for path in glob.glob(os.path.join(root, "numpy.libs", "*openblas*")) + glob.glob(
-            os.path.join(os.path.dirname(np.__file__), ".dylibs", "*openblas*")):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for prefix in ("scipy_openblas", "openblas"):
-            for suffix in ("64_", ""):
-                if hasattr(lib, f"{prefix}_set_num_threads{suffix}"):
-                    get = getattr(lib, f"{prefix}_get_num_threads{suffix}")
-                    set_ = getattr(lib, f"{prefix}_set_num_threads{suffix}")
-                    break
-            if set_ is not None:
-                break
-    if set_ is None:
-        yield None
-        return
-    old = int(get())
-    set_(int(n))
-    try:
-        yield old
-    finally:
-        set_(old)
+    with threadpool_limits(limits=int(n), user_api="blas"):
+        yield
 
 
 class Pairs:
