@@ -27,26 +27,20 @@ from markerplace.plan.place.methods import (
 )
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.greedy import apply_coverages, omp_greedy
-from markerplace.plan.types import MarkerCoverage
 from markerplace.testbed import marker_sets as placements
 from markerplace.testbed import config as tbconfig
+from helpers.recall_problems import problem
 
 
 def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> PlanData:
-    """A random placement problem: SPD base information, random sparse PSD coverages."""
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(N, 6, 6))
-    base = 100.0 * np.eye(6) + np.matmul(A, np.swapaxes(A, 1, 2))
-    covs = []
-    for _ in range(C + n_existing):
-        idx = np.sort(rng.choice(N, size=int(rng.integers(3, N // 2)), replace=False))
-        B = rng.normal(size=(len(idx), 6, 2)) * rng.uniform(1, 30)
-        covs.append(MarkerCoverage(idx, np.matmul(B, np.swapaxes(B, 1, 2))))
+    """A random placement problem (:func:`helpers.recall_problems.problem`) with a
+    perimeter for the uniform baseline."""
+    base, covs = problem(seed, N, C, n_existing)
     L = 40.0
     disc = SimpleNamespace(
         candidate_world_from_marker=np.stack([world_from_marker_pose(np.array([i, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]))
                                               for i in range(C)]),
-        perimeter_arclength=np.sort(rng.uniform(0, L, C)), perimeter_length=L)
+        perimeter_arclength=np.sort(np.random.default_rng([seed, 1]).uniform(0, L, C)), perimeter_length=L)
     return PlanData(disc, base, -entropy(base), covs, C, {})
 
 
