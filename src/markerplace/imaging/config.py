@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from markerplace.geometry import Intrinsics
 from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
 
-__all__ = ["ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT"]
+__all__ = ["ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT", "renders_alike"]
 
 
 @dataclass(frozen=True)
@@ -33,3 +33,10 @@ class ImagingConfig:
     occlusion_tolerance: float = 0.10
     visibility_margin_px: float = 16.0
     visibility_grid: int = 7
+
+
+def renders_alike(a: ImagingConfig, b: ImagingConfig) -> bool:
+    """True when ``a`` and ``b`` make the same images (camera, depth and visibility settings)
+    and differ at most in the feature preset: one render can then feed both extractions (the
+    plan's observe and the testbed's marker-free map)."""
+    return replace(a, sift=b.sift) == b

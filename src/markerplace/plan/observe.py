@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import logging
 from contextlib import nullcontext
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from markerplace.imaging.config import ImagingConfig
+from markerplace.imaging.config import ImagingConfig, renders_alike
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points
@@ -82,7 +82,7 @@ def _observe_task(engine, item):
 
 
 def _check_map_output(map_output: MapOutput, config: ImagingConfig) -> None:
-    if replace(map_output.config, sift=config.sift) != config:
+    if not renders_alike(map_output.config, config):
         raise ValueError("observe: the map's imaging settings differ from observe's beyond the SIFT preset")
 
 

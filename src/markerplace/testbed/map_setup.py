@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.imaging.config import SIFT_DEFAULT
+from markerplace.imaging.config import SIFT_DEFAULT, renders_alike
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
@@ -63,7 +63,7 @@ def observed_map_output(scene, map_poses: np.ndarray, cache_dir: str | Path, pla
     imaging (:func:`testbed_imaging_config`) renders otherwise than the plan's observe (another
     camera or depth setting): then the map renders itself."""
     imaging, observe_imaging = testbed_imaging_config(plan_config, imaging_config), plan_config.imaging
-    if replace(imaging, sift=observe_imaging.sift) != observe_imaging:
+    if not renders_alike(imaging, observe_imaging):
         log.info("observe: the testbed's imaging differs from the plan's beyond SIFT: the map renders on its own")
         return None
     key = base_features_key(map_base_key(scene, map_poses), True, imaging)
