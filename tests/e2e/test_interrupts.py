@@ -55,13 +55,16 @@ def test_sigterm_to_the_group_during_observe_leaves_no_orphan(tmp_path):
 
 def test_watchdog_ends_a_command_stuck_in_a_c_call(tmp_path):
     """The main thread inside one long C call (here PBKDF2, which never checks for signals)
-    cannot run the clean-up: the watchdog prints the line, stops the children and exits 130."""
+    cannot run the clean-up: the watchdog prints the line, stops the children and exits 130.
+    The process holds named semaphores (a spawn-context Event, as every process pool does):
+    its exit must leave multiprocessing's resource tracker nothing to warn about on stderr."""
     script = tmp_path / "stuck.py"
     script.write_text(textwrap.dedent("""
-        import hashlib, subprocess, sys
+        import hashlib, multiprocessing, subprocess, sys
         from markerplace.runtime.interrupt import InterruptGuard
         with InterruptGuard() as guard:
             try:
+                held = multiprocessing.get_context("spawn").Event()
                 child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], start_new_session=True)
                 print(child.pid, flush=True)
                 hashlib.pbkdf2_hmac("sha256", b"x", b"y", 2**31 - 1)  # minutes

@@ -18,7 +18,8 @@ What happens then:
   ``KeyboardInterrupt`` is kept quiet, anything else is reported as usual).
 * After a signal, :func:`stop_children` ends whatever child processes are left (terminate, then
   kill after ``CHILD_WAIT_S``); multiprocessing's resource tracker is left alone: it ignores signals and
-  exits by itself when this process is gone.
+  exits by itself when this process is gone (the watchdog's exit first unlinks this process's
+  semaphores, :func:`release_semaphores`, so the tracker has no leak to warn about).
 * A watchdog thread learns of the signal through :func:`signal.set_wakeup_fd`, which the C-level
   handler writes even while the main thread sits in a long C call (FAISS, a compiled kernel).
   If the process still runs ``GRACE_S`` seconds after the signal, the watchdog prints the
@@ -40,8 +41,8 @@ import time
 from contextlib import contextmanager
 from typing import Iterator
 
-__all__ = ["Terminated", "InterruptGuard", "deferred", "raise_if_stopping", "stop_children", "exit_code",
-           "resume_message", "GRACE_S", "CHILD_WAIT_S"]
+__all__ = ["Terminated", "InterruptGuard", "deferred", "raise_if_stopping", "stop_children", "release_semaphores",
+           "exit_code", "resume_message", "GRACE_S", "CHILD_WAIT_S"]
 
 GRACE_S = 3.0
 """Seconds the main thread has after the first signal to clean up before the watchdog ends the process."""
@@ -133,6 +134,34 @@ def stop_children(wait_s: float = CHILD_WAIT_S) -> int:
             pass
     psutil.wait_procs(alive, timeout=min(wait_s, 0.5))
     return len(children)
+
+
+def release_semaphores() -> int:
+    """Unlink the named semaphores of this process's multiprocessing objects (pool queues,
+    events, locks) now, as their finalizers would at a normal interpreter exit; returns how many.
+
+    For the watchdog, which ends the process with ``os._exit`` (no finalizers run): otherwise
+    multiprocessing's resource tracker unlinks them after the process is gone and prints
+    "UserWarning: resource_tracker: There appear to be N leaked semaphore objects" under the
+    command's one-line message. The standard library keeps these finalizers in
+    ``multiprocessing.util._finalizer_registry`` with ``SemLock._cleanup`` (unlink, then tell
+    the tracker) as their callback; no public call runs only them (``util._run_finalizers``
+    would also run the pools' own, which join threads and can block)."""
+    from multiprocessing import synchronize, util
+
+    released = 0
+    try:
+        finalizers = list(getattr(util, "_finalizer_registry", {}).values())
+    except RuntimeError:  # changed by another thread meanwhile: nothing safe to do
+        return 0
+    for finalizer in finalizers:
+        if getattr(finalizer, "_callback", None) is synchronize.SemLock._cleanup:
+            try:
+                finalizer()
+                released += 1
+            except Exception:  # already unlinked, or the tracker is gone: it has nothing to report then
+                pass
+    return released
 
 
 class InterruptGuard:
@@ -253,5 +282,6 @@ class InterruptGuard:
         self._announce(self.signum or signum)
         try:
             stop_children(self.child_wait_s)
+            release_semaphores()
         finally:
             os._exit(exit_code(self.signum or signum))
