@@ -39,6 +39,7 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
+from multiprocessing import synchronize, util
 from typing import Iterator
 
 __all__ = ["Terminated", "InterruptGuard", "deferred", "raise_if_stopping", "stop_children", "release_semaphores",
@@ -147,8 +148,6 @@ def release_semaphores() -> int:
     ``multiprocessing.util._finalizer_registry`` with ``SemLock._cleanup`` (unlink, then tell
     the tracker) as their callback; no public call runs only them (``util._run_finalizers``
     would also run the pools' own, which join threads and can block)."""
-    from multiprocessing import synchronize, util
-
     released = 0
     try:
         finalizers = list(getattr(util, "_finalizer_registry", {}).values())
