@@ -195,6 +195,9 @@ def test_evaluate_reports_a_row_per_condition_and_keeps_clean_caches(tmp_path):
     tables = (out / "tables.md").read_text()
     assert "## Test set `weighted`, condition `blur`" in tables and "## Recall per query condition" in tables
     assert "| `clean` | `blur` |" in tables
+    # paired against clean: each placement under blur minus itself on the clean images
+    assert "## Query conditions against clean, paired, at 5cm/5deg" in tables
+    assert "### Test set `weighted`: the tags' gain over no markers under the condition minus their clean gain" in tables
     errs = np.load(out / "query_errors.npz")
     assert errs["weighted@blur_t_err"].shape == errs["weighted_t_err"].shape == (2, 12)
     # the map is clean: one map feature set; the blurred queries have their own features and predictions

@@ -7,6 +7,8 @@ import pytest
 
 from markerplace.testbed.reporting.paired import (
     bootstrap_difference,
+    condition_differences,
+    condition_markdown,
     fixed_broken,
     fixed_broken_table,
     format_difference,
@@ -92,3 +94,52 @@ def test_fixed_and_broken_images() -> None:
     assert fixed_broken({k: v for k, v in hits.items() if k[0] != "none"}, [5]) == []
     md = paired_markdown({"weighted": hits}, [5], "5cm/5deg", n_boot=50)
     assert "fixed / broken" in md and "| Ours | +2 / -1 |" in md
+
+
+def _condition_hits(n: int = 300):
+    """Clean and blurred hits of no markers and of a 2-run baseline on the same n test images."""
+    rng = np.random.default_rng(5)
+    none_clean = rng.random(n) < 0.6
+    base_clean = [none_clean | (rng.random(n) < 0.3) for _ in range(2)]
+    lost = rng.random(n) < 0.25  # blur loses a quarter of the images in every placement
+    return {
+        "weighted": {("none", 0, 0): none_clean, ("random", 0, 5): base_clean[0], ("random", 1, 5): base_clean[1]},
+        "weighted@blur": {("none", 0, 0): none_clean & ~lost, ("random", 0, 5): base_clean[0] & ~lost,
+                          ("random", 1, 5): base_clean[1] & ~lost},
+    }, lost
+
+
+def test_condition_differences_pair_each_placement_with_itself_clean() -> None:
+    hits, lost = _condition_hits()
+    diffs = condition_differences(hits, n_boot=500, seed=1)
+    assert [(d["condition"], d["method"], d["k"], d["runs"]) for d in diffs] == [("blur", "none", 0, 1),
+                                                                                 ("blur", "random", 5, 2)]
+    none, rand = diffs
+    clean, blur = hits["weighted"], hits["weighted@blur"]
+    assert none["diff"] == pytest.approx(blur[("none", 0, 0)].mean() - clean[("none", 0, 0)].mean())
+    assert none["diff"] < 0 and none["diff_low"] < none["diff"] < none["diff_high"] < 0
+    assert np.isnan(none["gain"])  # no markers has no gain over itself
+    run_mean = lambda h: np.mean([h[("random", r, 5)] for r in (0, 1)], axis=0)  # noqa: E731
+    assert rand["diff"] == pytest.approx(run_mean(blur).mean() - run_mean(clean).mean())
+    gain_change = (run_mean(blur) - blur[("none", 0, 0)]) - (run_mean(clean) - clean[("none", 0, 0)])
+    assert rand["gain"] == pytest.approx(gain_change.mean())
+    assert rand["gain_low"] <= rand["gain"] <= rand["gain_high"]
+    # a condition that changes nothing gives zero with a zero-width interval
+    same = condition_differences({"weighted": hits["weighted"], "weighted@noise": hits["weighted"]}, n_boot=50)
+    assert all((d["diff"], d["diff_low"], d["diff_high"]) == (0.0, 0.0, 0.0) for d in same)
+    # runs that do not match both ways, and sets without their clean set, are left out
+    partial = {"weighted": hits["weighted"], "weighted@blur": {("random", 0, 5): blur[("random", 0, 5)]},
+               "uniform@blur": hits["weighted@blur"]}
+    assert condition_differences(partial, n_boot=50) == []
+
+
+def test_condition_markdown_tables() -> None:
+    hits, _ = _condition_hits()
+    md = condition_markdown(hits, "5cm/5deg", n_boot=200)
+    assert md.startswith("## Query conditions against clean, paired, at 5cm/5deg (95 % interval)")
+    assert "### Test set `weighted`: recall under the condition minus clean recall" in md
+    assert "| Method | k | `blur` |" in md
+    rows = [line for line in md.splitlines() if line.startswith("| No markers") or line.startswith("| Rand.")]
+    assert len(rows) == 3  # no markers and random in the first table, random alone in the gain table
+    assert rows[0].startswith("| No markers | 0 | *-") and rows[1].startswith("| Rand. (2 runs) | 5 | *-")
+    assert condition_markdown({"weighted": hits["weighted"]}, "5cm/5deg") == ""  # clean only: no section

@@ -10,6 +10,13 @@ an image's outcomes under every method together: the pairing) and, when ``R >= 2
 baseline runs. It therefore covers both the choice of test images and the spread between
 baseline placements, as far as ``R`` runs can show it. With one run the interval covers the
 test images only. The cells of a table are not corrected for multiple comparisons.
+
+With query conditions (``evaluate --conditions``), :func:`condition_markdown` compares each
+placement under a condition with the *same* placement on the *same* clean images: the per-image
+difference of its hits (mean over its runs, run r under the condition against run r clean),
+and the tags' gain under the condition (placement minus no markers) against their clean gain.
+Those intervals resample the test images only: the placements are fixed, the question is what
+the condition does to them.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from markerplace.testbed.conditions import CLEAN, set_name, split_set
 from markerplace.testbed.marker_sets import NO_MARKERS, baseline_methods
 from markerplace.testbed.reporting.tables import md_name
 
@@ -192,3 +200,101 @@ def paired_markdown(hits_by_test_set: Mapping[str, Mapping[tuple[str, int, int],
              "above zero; italic: below zero. Cells are not corrected for multiple comparisons.")
     return "\n".join([f"## Paired differences at {threshold_label} (95 % interval)", "", intro, ""]
                      + parts)
+
+
+def _run_mean(hits: Mapping[tuple[str, int, int], np.ndarray], method: str, k: int) -> tuple[list[int], np.ndarray]:
+    """(runs, (n,) per-image mean over those runs) of ``method`` at ``k`` in ``hits``."""
+    runs = sorted(r for (m, r, kk) in hits if m == method and kk == k)
+    return runs, np.mean([np.asarray(hits[(method, r, k)], float) for r in runs], axis=0)
+
+
+def condition_differences(hits_by_set: Mapping[str, Mapping[tuple[str, int, int], np.ndarray]],
+                          n_boot: int = 2000, seed: int = 0) -> list[dict]:
+    """Every placement under each query condition against itself on the clean images.
+
+    Args:
+        hits_by_set: image set name (``weighted``, ``weighted@blur``:
+            :func:`~markerplace.testbed.conditions.set_name`) -> (method, run, k) -> (n,) bool hits
+            at the threshold; a condition's set holds the same test images as its clean set.
+        n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
+
+    Returns:
+        One dict per (test set, condition other than clean, method, k) whose runs are present
+        both ways: ``test_set, condition, method, k, runs`` and two differences in recall
+        fractions, each with its 95 % interval over the test images: ``diff, diff_low, diff_high``
+        (recall under the condition minus clean recall, run by run) and, for placements with
+        markers, ``gain, gain_low, gain_high`` (the gain over no markers under the condition
+        minus the clean gain; NaN for no markers or where no markers is missing).
+    """
+    out = []
+    for name, hits in hits_by_set.items():
+        test_set, condition = split_set(name)
+        clean = hits_by_set.get(set_name(test_set, CLEAN))
+        if condition == CLEAN or clean is None:
+            continue
+        for method, k in dict.fromkeys((m, kk) for (m, _, kk) in hits):
+            runs, under = _run_mean(hits, method, k)
+            clean_runs, before = _run_mean(clean, method, k)
+            if runs != clean_runs:
+                continue
+            zero = np.zeros((1, under.size))
+            diff, low, high = bootstrap_difference(under - before, zero, n_boot, seed)
+            gain = (float("nan"),) * 3
+            none_key = (NO_MARKERS, 0, 0)
+            if method != NO_MARKERS and none_key in hits and none_key in clean:
+                change = (under - np.asarray(hits[none_key], float)) - (before - np.asarray(clean[none_key], float))
+                gain = bootstrap_difference(change, zero, n_boot, seed)
+            out.append(dict(test_set=test_set, condition=condition, method=method, k=int(k), runs=len(runs),
+                            diff=diff, diff_low=low, diff_high=high,
+                            gain=gain[0], gain_low=gain[1], gain_high=gain[2]))
+    return out
+
+
+def condition_table(diffs: Sequence[dict], key: str) -> str:
+    """Markdown table of one test set's :func:`condition_differences`: rows (method, k), columns
+    conditions, cells :func:`format_difference` of ``key`` (``diff`` or ``gain``); rows whose
+    cells are all NaN are left out."""
+    conditions = list(dict.fromkeys(d["condition"] for d in diffs))
+    lines = ["| Method | k | " + " | ".join(f"`{c}`" for c in conditions) + " |",
+             "|---|---|" + "---|" * len(conditions)]
+    for method, k in dict.fromkeys((d["method"], d["k"]) for d in diffs):
+        cells = []
+        for c in conditions:
+            d = next((d for d in diffs if (d["method"], d["k"], d["condition"]) == (method, k, c)), None)
+            ok = d is not None and not np.isnan(d[key])
+            cells.append(format_difference(dict(diff=d[key], low=d[f"{key}_low"], high=d[f"{key}_high"]))
+                         if ok else "-")
+        if any(c != "-" for c in cells):
+            runs = max(d["runs"] for d in diffs if (d["method"], d["k"]) == (method, k))
+            label = md_name(method) + (f" ({runs} runs)" if runs > 1 else "")
+            lines.append(f"| {label} | {k} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def condition_markdown(hits_by_set: Mapping[str, Mapping[tuple[str, int, int], np.ndarray]],
+                       threshold_label: str, n_boot: int = 2000, seed: int = 0) -> str:
+    """The ``tables.md`` section "Query conditions against clean" ("" without a non-clean
+    condition): per test set, what each condition costs every placement (its recall under the
+    condition minus its clean recall), then what it does to the tags' gain over no markers.
+
+    Args:
+        hits_by_set: as :func:`condition_differences`.
+        threshold_label: e.g. ``5cm/5deg``, for the heading.
+        n_boot, seed: bootstrap settings.
+    """
+    diffs = condition_differences(hits_by_set, n_boot, seed)
+    if not diffs:
+        return ""
+    parts = [f"## Query conditions against clean, paired, at {threshold_label} (95 % interval)", "",
+             "Each placement under a condition minus the same placement on the same clean test images "
+             "(run by run, then the mean over runs), in recall percentage points; the interval resamples "
+             "the test images. Bold: the whole interval is above zero; italic: below zero. Not corrected "
+             "for multiple comparisons.", ""]
+    for test_set in dict.fromkeys(d["test_set"] for d in diffs):
+        mine = [d for d in diffs if d["test_set"] == test_set]
+        parts += [f"### Test set `{test_set}`: recall under the condition minus clean recall", "",
+                  condition_table(mine, "diff"), ""]
+        if any(not np.isnan(d["gain"]) for d in mine):
+            parts += [f"### Test set `{test_set}`: the tags' gain over no markers under the condition "
+                      "minus their clean gain", "", condition_table(mine, "gain"), ""]
+    return "\n".join(parts)

@@ -22,7 +22,7 @@ from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
 from markerplace.testbed.reporting.predicted import (error_summary, log_predicted, predicted_markdown, predicted_rows,
                                                     write_predicted_csv)
-from markerplace.testbed.reporting.paired import paired_differences, paired_markdown, paired_table
+from markerplace.testbed.reporting.paired import condition_markdown, paired_differences, paired_markdown, paired_table
 from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
 
 __all__ = ["write_outputs"]
@@ -87,6 +87,7 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     hits = {name: {(m, run, k): metrics.hit_mask(*res, t_main, r_main)
                    for (m, run, k, t), res in results.items() if t == name} for name in names}
     md += paired_markdown(hits, ks, main, seed=config.seed)
+    md += condition_markdown(hits, main, seed=config.seed)
     ts0 = names[0]  # the first test set, clean unless --conditions leaves clean out
     diffs = paired_differences(hits[ts0], ks, seed=config.seed)
     if diffs:  # the printed summary carries the intervals too: a recall table alone can be noise
