@@ -110,10 +110,20 @@ class TestbedImaging:
         """Features of images ``indices`` of (N, 4, 4) ``world_from_cam`` rendered with ``markers``."""
         return dict(self.render_iter(world_from_cam, indices, markers, map_only, desc, condition))
 
+    def columns(self, markers: Sequence[Marker]) -> np.ndarray:
+        """(M,) union indices of ``markers`` (the columns of a base in-view mask)."""
+        return np.array([self.union_index[_geometry_key(m)] for m in markers], dtype=np.int64)
+
+    def view_digest(self, in_view: np.ndarray, markers: Sequence[Marker]) -> str:
+        """Digest of the (N, M) in-view columns of ``markers`` in the (N, U) base mask, in the
+        markers' order: what a prediction with these markers reads of the mask, the same
+        whatever other placements the run evaluates (a key never holds the whole union)."""
+        return cache.hash_of(np.asarray(in_view, bool)[:, self.columns(markers)])
+
     def view_keys(self, in_view: np.ndarray, markers: Sequence[Marker]) -> list[tuple]:
         """Per image: the ``markers`` in view as sorted (union index, tag id) pairs, from the
         (N, U) base mask (empty: the image equals its marker-free render)."""
-        idx = np.array([self.union_index[_geometry_key(m)] for m in markers], dtype=np.int64)
+        idx = self.columns(markers)
         if len(idx) == 0:
             return [()] * len(in_view)
         ids = [int(m.tag_id) for m in markers]
@@ -199,7 +209,9 @@ class BaseImages:
         self.features = feats
         self.in_view = mask.reshape(N, len(imaging.union))
         self.key = feat_key
-        self.digest = cache.hash_of(cache.content_digest(feat_dir), cache.content_digest(mask_path))
+        # the features' bytes only: the mask's columns depend on which placements this run
+        # evaluates, so each prediction keys the columns of its own markers (view_digest)
+        self.digest = cache.content_digest(feat_dir)
 
     def _depth_mask(self, imaging: TestbedImaging, mask_key: str, name: str) -> np.ndarray:
         """(N, U) in-view mask from depth-only renders, streamed to ``in_view_parts/`` (resumed

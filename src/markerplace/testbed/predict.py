@@ -357,9 +357,13 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
         for s in sets.values():
             if p.test_sets is not None and s.name not in p.test_sets and not s.own:
                 continue
-            key = cache.hash_of("prediction-v2", DRAWING_VERSION, cb_key, s.base.digest, s.world_from_cam, marker_arr, lcfg, imaging) \
-                if s.exclude is None else cache.hash_of("map-prediction-v2", DRAWING_VERSION, cb_key, s.base.digest, s.world_from_cam,
-                                                        s.exclude, marker_arr, lcfg, imaging)
+            # what it reads: the set's features, the in-view columns of its own markers (in the
+            # set and the map), the map (cb_key) and settings; not the other placements' markers
+            views = (tb.view_digest(s.base.in_view, p.markers), tb.view_digest(map_base.in_view, p.markers))
+            key = cache.hash_of("prediction-v3", DRAWING_VERSION, cb_key, s.base.digest, views, s.world_from_cam,
+                                marker_arr, lcfg, imaging) \
+                if s.exclude is None else cache.hash_of("map-prediction-v3", DRAWING_VERSION, cb_key, s.base.digest, views,
+                                                        s.world_from_cam, s.exclude, marker_arr, lcfg, imaging)
             est = load_prediction(pred_dir, key)
             if est is not None:
                 predictions[PredictionKey(p.method, p.run, p.k, s.name)] = est
