@@ -330,3 +330,30 @@ def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatc
     with pytest.raises(UserError, match="longer than 12 h"):
         size_guard.measured_size_check(scene, spec, config, 5)(disc)
     size_guard.measured_size_check(scene, spec, config, 5, force=True)(disc)  # --force: a warning only
+
+
+def test_size_guard_counts_query_conditions_and_the_ceiling():
+    """Every query condition renders and localizes the test images again, and the ceiling runs
+    every candidate alone on the clean ones: the estimate grows with both (a corridor run with
+    six conditions and the ceiling took 6 h where a guess that left them out said 2 h 15 min)."""
+    from dataclasses import replace
+
+    from markerplace.plan.config import PlanConfig
+    from markerplace.scene import load_scene
+    from markerplace.testbed import config as tb
+
+    scene, plan = load_scene("tiny"), PlanConfig()
+    clean = tb.EvaluateConfig(test=tb.TestSetConfig(tests=100, sets=("weighted",)),
+                              study=tb.StudyConfig(methods=("none", "omp", "random"), runs=2, ks=(5, 10)))
+    base = size_guard.estimate_run(scene, plan, clean, poses=400)
+    assert base.queries == 100 * (1 + 2 + 2 * 2)  # none, omp at two k, random at two k x 2 runs
+    three = replace(clean, test=replace(clean.test, conditions=("clean", "blur", "noise")))
+    est = size_guard.estimate_run(scene, plan, three, poses=400)
+    assert est.queries == 3 * base.queries
+    renders = 2 * 100 * size_guard.SECONDS_PER_POSE_CORE / est.workers  # the two conditions' test images
+    assert est.seconds == pytest.approx(base.seconds + renders + 2 * base.queries * size_guard.SECONDS_PER_QUERY_CORE / est.workers)
+    ceiling = replace(clean, diagnostics=tb.DiagnosticsConfig(ceiling=True))
+    first_guess = size_guard.estimate_run(scene, plan, ceiling, poses=400)
+    assert first_guess.queries == base.queries + 2 * 100  # its picks at each k, candidates not known yet
+    measured = size_guard.estimate_run(scene, plan, ceiling, poses=400, candidates=30)
+    assert measured.queries == first_guess.queries + 30 * 100 and measured.seconds > first_guess.seconds

@@ -136,7 +136,8 @@ def machine_memory_bytes() -> float:
 
 
 def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int = 0,
-                 poses: int | None = None, seconds_per_pose: float | None = None) -> RunEstimate:
+                 poses: int | None = None, seconds_per_pose: float | None = None,
+                 candidates: int | None = None) -> RunEstimate:
     """Estimate camera poses, peak memory and wall-clock time of planning (and evaluating) ``scene``.
 
     Poses: the model's bounding box in x and y, shrunk by the clearance on each side, divided
@@ -144,8 +145,12 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     ``--level all``: one per started 3.5 m of height above the first 0.5 m). An upper bound:
     walls and furniture take space.
     Memory and time use the per-pose costs measured on the reference machine (module
-    constants). ``evaluate`` adds a map re-render per placement with markers and one
-    localization per test image, test set and placement. ``poses``: the exact count (from a
+    constants). ``evaluate`` adds a map re-render per placement with markers, and one render
+    per test image, test set and query condition (``--conditions``) and one localization per
+    such image and placement. ``--ceiling`` adds its k picks as placements and, once
+    ``candidates`` (the discretization's count) is known, one localization per clean test
+    image per candidate (an upper bound: a single tag's run localizes only the images that
+    see it; its few map re-renders are not counted). ``poses``: the exact count (from a
     discretization) instead of the bound; ``seconds_per_pose``: a measured cost of one pose on
     one core (:func:`time_sample`) instead of :data:`SECONDS_PER_POSE_CORE`.
     """
@@ -165,11 +170,14 @@ def estimate_run(scene, plan_config, evaluate_config=None, extra_placements: int
     core_seconds = poses * per_pose
     queries = 0
     if evaluate_config is not None:
-        with_markers = marker_set_count(evaluate_config) + extra_placements
+        ceiling = evaluate_config.diagnostics.ceiling
+        with_markers = marker_set_count(evaluate_config) + extra_placements \
+            + (len(evaluate_config.study.ks) if ceiling else 0)
         placements = with_markers + (1 if NO_MARKERS in evaluate_config.study.methods else 0)
-        queries = evaluate_config.test.tests * len(evaluate_config.test.sets) * placements
-        core_seconds += with_markers * poses * per_pose + queries * SECONDS_PER_QUERY_CORE \
-            + evaluate_config.test.tests * len(evaluate_config.test.sets) * per_pose
+        clean_images = evaluate_config.test.tests * len(evaluate_config.test.sets)
+        images = clean_images * len(evaluate_config.test.conditions)
+        queries = images * placements + (clean_images * candidates if ceiling and candidates else 0)
+        core_seconds += with_markers * poses * per_pose + queries * SECONDS_PER_QUERY_CORE + images * per_pose
     return RunEstimate(footprint, poses, memory, core_seconds / workers, workers, queries, storeys, exact)
 
 
@@ -285,7 +293,8 @@ def measured_size_check(scene, scene_spec, plan_config, k: int, force: bool = Fa
         tags = min(k, len(disc.candidate_world_from_marker))  # a --target-recall plan's k is only a bound
         stages = estimate_plan(sample, N, workers, plan_config.similarity, tags, plan_config.placement.similarity)
         estimate = estimate_run(scene, plan_config, evaluate_config, extra_placements, poses=N,
-                                seconds_per_pose=sample.seconds_per_pose)
+                                seconds_per_pose=sample.seconds_per_pose,
+                                candidates=len(disc.candidate_world_from_marker))
         evaluation = 0.0
         if evaluate_config is not None:
             evaluation = estimate.seconds - estimate_run(scene, plan_config, None, 0, poses=N,
