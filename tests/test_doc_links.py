@@ -6,6 +6,7 @@ renamed heading or a moved page cannot leave a dead link on the rendered pages."
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 from pathlib import Path
 
 import pytest
@@ -21,7 +22,8 @@ def github_anchor(heading: str) -> str:
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 
 
-def anchors(page: Path) -> set[str]:
+@lru_cache(maxsize=None)
+def anchors(page: Path) -> frozenset[str]:
     """Every heading anchor of ``page`` (headings inside fenced code blocks are not headings)."""
     found: set[str] = set()
     count: dict[str, int] = {}
@@ -35,7 +37,7 @@ def anchors(page: Path) -> set[str]:
             n = count.get(a, 0)
             count[a] = n + 1
             found.add(a if n == 0 else f"{a}-{n}")
-    return found
+    return frozenset(found)
 
 
 def test_github_anchor_rule():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -143,3 +145,11 @@ def test_condition_markdown_tables() -> None:
     assert len(rows) == 3  # no markers and random in the first table, random alone in the gain table
     assert rows[0].startswith("| No markers | 0 | *-") and rows[1].startswith("| Rand. (2 runs) | 5 | *-")
     assert condition_markdown({"weighted": hits["weighted"]}, "5cm/5deg") == ""  # clean only: no section
+
+
+def test_a_placement_missing_from_the_clean_images_is_left_out_quietly() -> None:
+    hits = {"weighted": {("none", 0, 0): np.ones(5, bool)},
+            "weighted@blur": {("none", 0, 0): np.ones(5, bool), ("omp", 0, 5): np.ones(5, bool)}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "mean of empty slice" for the missing clean runs
+        assert [d["method"] for d in condition_differences(hits, n_boot=20)] == ["none"]

@@ -202,10 +202,12 @@ def paired_markdown(hits_by_test_set: Mapping[str, Mapping[tuple[str, int, int],
                      + parts)
 
 
-def _run_mean(hits: Mapping[tuple[str, int, int], np.ndarray], method: str, k: int) -> tuple[list[int], np.ndarray]:
-    """(runs, (n,) per-image mean over those runs) of ``method`` at ``k`` in ``hits``."""
+def _run_mean(hits: Mapping[tuple[str, int, int], np.ndarray], method: str,
+              k: int) -> tuple[list[int], np.ndarray | None]:
+    """(runs, (n,) per-image mean over those runs) of ``method`` at ``k`` in ``hits`` (None
+    when it has no run there)."""
     runs = sorted(r for (m, r, kk) in hits if m == method and kk == k)
-    return runs, np.mean([np.asarray(hits[(method, r, k)], float) for r in runs], axis=0)
+    return runs, np.mean([np.asarray(hits[(method, r, k)], float) for r in runs], axis=0) if runs else None
 
 
 def condition_differences(hits_by_set: Mapping[str, Mapping[tuple[str, int, int], np.ndarray]],
