@@ -58,7 +58,8 @@ def map_image_from_rgbd(
 ) -> MapImage:
     """Extract SIFT, lift to 3D with ``depth`` (metres) and detect tags in one map image."""
     kp, desc = extract_sift(rgb, sift)
-    pts, valid = lift_to_3d(kp, depth, K, world_from_cam, max_depth=max_depth)
+    pts, valid = lift_to_3d(kp, depth, K, world_from_cam, max_depth=max_depth,
+                            image_size=(rgb.shape[1], rgb.shape[0]))
     tags = np.array([d.tag_id for d in detect_tags(rgb)], np.int64) if detect else np.zeros(0, np.int64)
     return MapImage(np.asarray(world_from_cam, float), kp[valid], desc[valid], pts[valid], tags)
 

@@ -98,13 +98,15 @@ def lift_to_3d(
     world_from_cam: np.ndarray,
     max_depth: float = 10.0,
     discontinuity_rel: float = 0.05,
+    image_size: tuple[int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Lift pixel keypoints to world points with a planar depth map.
 
     The depth map must be pixel-aligned with the image the keypoints come from; if it has a
     different resolution (the paper renders depth at half resolution) keypoints are scaled by
-    the ratio ``depth.shape / image shape`` where the image shape is read from ``K``
-    (``2 cx, 2 cy``). Depth is read bilinearly when the 2x2 neighbours are all valid and agree
+    the ratio ``depth.shape / image shape`` where the image shape is ``image_size`` or, when not
+    given, read from ``K`` (``2 cx, 2 cy``: right for renders, whose principal point is the image
+    centre; a real camera's is not, so callers with real images pass ``image_size``). Depth is read bilinearly when the 2x2 neighbours are all valid and agree
     within ``discontinuity_rel`` (relative); points whose neighbours disagree (depth edges),
     with zero/non-finite depth, or farther than ``max_depth`` metres are dropped.
 
@@ -115,6 +117,7 @@ def lift_to_3d(
         world_from_cam: (4, 4) camera pose.
         max_depth: points farther than this (metres, planar depth) are invalid.
         discontinuity_rel: maximal relative spread of the 2x2 neighbour depths.
+        image_size: (width, height) of the keypoints' image in pixels, or None (``2 cx, 2 cy``).
 
     Returns:
         points_world (K, 3) float64 (NaN where invalid) and valid (K,) bool.
@@ -126,7 +129,7 @@ def lift_to_3d(
     if n == 0:
         return out, np.zeros(0, bool)
     h, w = depth.shape
-    img_w, img_h = 2.0 * K[0, 2], 2.0 * K[1, 2]
+    img_w, img_h = (2.0 * K[0, 2], 2.0 * K[1, 2]) if image_size is None else (float(image_size[0]), float(image_size[1]))
     sx, sy = w / img_w, h / img_h
     # pixel centres at integers in both images: x_d = (x + 0.5) * s - 0.5
     xd = (kp[:, 0] + 0.5) * sx - 0.5
