@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import logging
 
+from markerplace.cli.frames_eval import add_frames_eval_args, cmd_evaluate_frames
 from markerplace.cli.options import plan_config_for_budgets
 from markerplace.errors import UserError
 from markerplace.pipelines.evaluate import RunInputs, evaluate
@@ -41,6 +42,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     # its budgets are valid before the plan settings use them (a --plan may bring a where file)
     validate_evaluate_config(config, where=args.where is not None or args.plan is not None)
     inputs = RunInputs(force=args.force, adopt=args.adopt, progress=not getattr(args, "quiet", False))
+    if args.frames is not None:
+        return cmd_evaluate_frames(args, plan_config_for_budgets(args, config.study.ks), config, inputs.progress)
     if args.plan is not None:
         start = start_from_plan(args.plan, values_from_args(args, PlanConfig(), "evaluate"), config,
                                 ks_given=args.k is not None, scene=args.scene, up=args.up,
@@ -89,5 +92,6 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     add_setting_args(p, EvaluateConfig(), "evaluate", {"localization": study, "diagnostics": diagnostics},
                      defaults=True)
     add_plan_args(p, "evaluate")
+    add_frames_eval_args(p)
     p.set_defaults(func=cmd_evaluate, k=None)  # (--k's default is the field's; None tells --plan it was left out)
     return p

@@ -29,7 +29,7 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import marker_key
 from markerplace.localization.features import SIFT_DEFAULT
-from markerplace.pipelines.plan_frames import fused_surface_path, prepare_frames
+from markerplace.pipelines.plan_frames import prepare_frames
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, write_page
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
@@ -112,7 +112,7 @@ def run_frames_evaluation(fs, plan_config, config, frames_config: FramesEvalConf
     data = prepare_frames(fs, map_idx, plan_config, out / "plan", mesh=mesh, progress=progress, k=max(ks))
     placements = build_placements(data, plan_config.placement, config)
     log.info("evaluating %d marker sets: %s", len(placements), ", ".join(sorted({p.method for p in placements})))
-    surface_path = Path(mesh) if mesh is not None else fused_surface_path(out / "plan")
+    surface_path = Path(mesh) if mesh is not None else out / "plan" / "fused.ply"
     surface = SceneSpec(str(surface_path), up="z", unit_scale=1.0)
     imaging = ImagingConfig(camera=fs.intrinsics, sift=SIFT_DEFAULT, max_depth=plan_config.imaging.max_depth)
     spec = FrameJobSpec(fs, surface, imaging, frames_config.composite, config.seed)
@@ -200,7 +200,7 @@ def _write_report(out: Path, fs, spec: FrameJobSpec, placements, query_idx, in_v
         seen = [f for f in query_idx if markers_in_view_of(in_view, f, shown.markers)]
         for f in seen[:: max(1, len(seen) // count)][:count]:
             rgb, _, stats = real_image(worker, int(f), markers_in_view_of(in_view, f, shown.markers))
-            vis = sum(int(s.visible_px) for s in stats)
+            vis = sum(int(s.covered_px - s.hidden_px) for s in stats)
             figures.append(img(jpeg_uri(rgb), f"frame {fs.frames[f].name}",
                                f"{fs.frames[f].name}: {len(stats)} tag(s) of {shown.method} k={shown.k}, "
                                f"{vis} tag pixels visible"))

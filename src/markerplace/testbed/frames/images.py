@@ -155,7 +155,7 @@ def image_task(worker: FrameWorker, item) -> ImageFeatures:
         res = worker.engine.render(world_from_cam, list(markers))
         return _features(worker, res.rgb, res.depth, world_from_cam, {})
     rgb, depth_m, stats = real_image(worker, frame, markers)
-    extras = {"visible_px": np.array([s.visible_px for s in stats], np.int64).reshape(-1),
+    extras = {"visible_px": np.array([s.covered_px - s.hidden_px for s in stats], np.int64).reshape(-1),
               "hidden_px": np.array([s.hidden_px for s in stats], np.int64).reshape(-1),
               "hole_px": np.array([s.hole_px for s in stats], np.int64).reshape(-1)}
     return _features(worker, rgb, depth_m, world_from_cam, extras)
