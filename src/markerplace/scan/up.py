@@ -130,8 +130,9 @@ def estimate_up_from_mesh(vertices: np.ndarray, normals: np.ndarray, prior: Sequ
 
     Returns:
         unit (3,) up, or None when fewer than 200 vertices or 2 % of them face up within
-        ``search_deg``. The estimate is the mean of the candidates, then re-taken twice over
-        the normals within 5 deg of it (the dominant mode, not the average of slopes).
+        ``search_deg``. The estimate starts at the mean of the candidates and moves to the mean
+        of those within 6 deg of it until it settles (the dominant mode, not the average of
+        slopes and ramps).
     """
     V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     N = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -147,12 +148,16 @@ def estimate_up_from_mesh(vertices: np.ndarray, normals: np.ndarray, prior: Sequ
         return None
     up = cand.mean(axis=0)
     up /= np.linalg.norm(up)
-    for _ in range(2):
-        near = cand[cand @ up > math.cos(math.radians(5.0))]
+    for _ in range(30):  # mean shift with a flat 6 deg window: to the mode, not the mean
+        near = cand[cand @ up > math.cos(math.radians(6.0))]
         if len(near) < 100:
             break
-        up = near.mean(axis=0)
-        up /= np.linalg.norm(up)
+        new = near.mean(axis=0)
+        new /= np.linalg.norm(new)
+        moved = float(np.linalg.norm(new - up))
+        up = new
+        if moved < 1e-6:
+            break
     return up
 
 
