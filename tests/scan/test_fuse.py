@@ -149,8 +149,9 @@ def test_tum_association_matches_associate_py():
 
 def test_tum_layout_parsing_and_fusion(tmp_path, capsys):
     expect = _write_tum(tmp_path / "seq")
-    fs = open_frameset(tmp_path / "seq", "auto", tmp_path / "seq" / "cam.json")
-    assert fs.format == "tum" and fs.depth_scale == 5000.0
+    # TUM's world has no stated up axis (it would be estimated): this one is z up, looking at a ceiling
+    fs = open_frameset(tmp_path / "seq", "auto", tmp_path / "seq" / "cam.json", up="z")
+    assert fs.format == "tum" and fs.depth_scale == 5000.0 and fs.up_source == "--up"
     assert [f.name for f in fs.frames] == expect["names"]
     assert fs.frames[0].depth_path.name == "1.005000.png" and fs.frames[1].depth_path.name == "1.040000.png"
     T1 = fs.frames[1].world_from_cam
@@ -159,7 +160,7 @@ def test_tum_layout_parsing_and_fusion(tmp_path, capsys):
     np.testing.assert_allclose(rotation_from_quaternion(0, 0, 0, 1), np.eye(3))
     out = tmp_path / "tum.ply"
     assert main(["--quiet", "fuse", str(tmp_path / "seq"), "--out", str(out), "--intrinsics",
-                 str(tmp_path / "seq" / "cam.json"), "--voxel", "0.02"]) == 0
+                 str(tmp_path / "seq" / "cam.json"), "--voxel", "0.02", "--up", "z"]) == 0
     mesh = load_scene(str(out))
     V = np.asarray(mesh.parts[0].vertices, float)
     # both frames fuse onto the one world plane z = 2 (depth scale 5000 and the poses applied)

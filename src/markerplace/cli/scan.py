@@ -15,8 +15,8 @@ from pathlib import Path
 
 from markerplace.errors import UserError
 from markerplace.output_checks import check_output_file
-from markerplace.scan.frames import open_frameset
-from markerplace.scan.fuse import FuseConfig, fuse_frameset, parse_trunc, write_mesh_ply
+from markerplace.scan.frames import FORMATS, open_frameset
+from markerplace.scan.fuse import FuseConfig, fuse_frameset, parse_trunc, refine_up, write_mesh_ply
 from markerplace.scan.simulate import ScanConfig, simulate_scan
 from markerplace.scene import load_scene
 from markerplace.scene.builtin.catalogue import builtin_names
@@ -53,10 +53,11 @@ def cmd_fuse(args: argparse.Namespace) -> int:
     config = fuse_config_from_args(args)
     if args.max_dt <= 0:
         raise UserError(f"--max-dt {args.max_dt:g} must be positive (seconds)")
-    fs = open_frameset(args.frames, args.format, args.intrinsics, args.max_dt)
-    log.info("%s: %d frames (%s layout), %dx%d, depth scale %g per metre", fs.root, len(fs.frames), fs.format,
-             fs.intrinsics.width, fs.intrinsics.height, fs.depth_scale)
+    fs = open_frameset(args.frames, args.format, args.intrinsics, args.max_dt, up=args.up)
+    log.info("%s: %d frames (%s layout), %dx%d, depth scale %g per metre, up axis from %s", fs.root, len(fs.frames),
+             fs.format, fs.intrinsics.width, fs.intrinsics.height, fs.depth_scale, fs.up_source)
     mesh = fuse_frameset(fs, config, progress=_progress(args))
+    fs, mesh = refine_up(fs, mesh)
     write_mesh_ply(mesh, out)
     print(f"wrote {out} ({len(mesh.triangles)} faces)")
     return 0
@@ -101,14 +102,18 @@ def add_fuse_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "fuse",
         help="fuse posed RGB-D frames into a vertex-coloured mesh (TSDF + marching cubes)",
-        description="Fuse posed RGB-D frames (markerplace layout, see docs/rgbd_layout.md, or the TUM RGB-D "
-                    "benchmark layout) into a vertex-coloured triangle mesh with a TSDF volume and marching "
-                    "cubes; writes binary PLY in the poses' world frame.",
+        description="Fuse posed RGB-D frames (markerplace layout, TUM RGB-D, 7-Scenes, nerfstudio transforms.json "
+                    "or Stray Scanner; see docs/rgbd_layout.md) into a vertex-coloured triangle mesh with a TSDF "
+                    "volume and marching cubes; writes binary PLY in the poses' world frame turned so that +z is up.",
     )
     p.add_argument("frames", metavar="FRAMES_DIR", help="folder of RGB-D frames with poses")
     p.add_argument("--out", required=True, help="output mesh, .ply")
-    p.add_argument("--format", default="auto", choices=["auto", "markerplace", "tum"],
-                   help="input layout (default auto: markerplace if poses.txt/intrinsics.json exist, tum if rgb.txt/depth.txt do)")
+    p.add_argument("--format", default="auto", choices=["auto", *FORMATS],
+                   help="input layout (default auto: markerplace if poses.txt/intrinsics.json exist, tum if rgb.txt/depth.txt "
+                        "do, 7scenes if frame-*.pose.txt do, nerfstudio if transforms.json does, stray if odometry.csv does)")
+    p.add_argument("--up", default=None, metavar="AXIS",
+                   help="up direction in the input's world: x, y, z, -x, -y, -z or three numbers such as 0,0.9,0.4 "
+                        "(default: the layout's, else estimated from the cameras and refined by the mesh's floors)")
     p.add_argument("--intrinsics", default=None, metavar="FILE.json",
                    help="camera of a TUM sequence: {width, height, fx, fy, cx, cy[, depth_scale=5000]} (default: TUM freiburg1)")
     p.add_argument("--voxel", type=float, default=FUSE_DEFAULTS["voxel"], help="voxel edge, metres (default 0.02)")

@@ -1,4 +1,4 @@
-"""RGB-D frame sets on disk: the project's own layout and the TUM RGB-D benchmark layout.
+"""RGB-D frame sets on disk: the project's own layout, and opening a folder in any layout.
 
 markerplace layout (``--format markerplace``)
 ---------------------------------------------
@@ -23,10 +23,14 @@ markerplace layout (``--format markerplace``)
 * ``poses.txt`` defines the frames and their order; images it does not name are ignored. Frame
   names contain no whitespace and no ``/``.
 
-The TUM RGB-D layout (``--format tum``) is read by :mod:`markerplace.scan.tum`; the frame
-types, pose checks and ``intrinsics.json`` parsing both layouts share are in
+The other layouts: TUM RGB-D (``--format tum``, :mod:`markerplace.scan.tum`), 7-Scenes
+(``7scenes``, :mod:`markerplace.scan.sevenscenes`), nerfstudio ``transforms.json``
+(``nerfstudio``, :mod:`markerplace.scan.nerfstudio`) and Stray Scanner (``stray``,
+:mod:`markerplace.scan.stray`); the frame types and shared parsing are in
 :mod:`markerplace.scan.frameset`. This module reads and writes the markerplace layout, detects
-the layout of a folder (:func:`open_frameset`) and loads a frame's images (:func:`load_frame`).
+the layout of a folder and opens it with its up axis turned to +z (:func:`open_frameset`, rule
+in :mod:`markerplace.scan.up`); :func:`load_frame` (from :mod:`markerplace.scan.images`) loads
+a frame's images.
 
 Every problem with a frame set raises :class:`~markerplace.errors.UserError` with one line that
 names the file (and line) at fault.
@@ -35,6 +39,7 @@ names the file (and line) at fault.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,27 +49,42 @@ from markerplace.geometry import Intrinsics
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.scan.frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
                        read_intrinsics)
+from markerplace.scan.images import load_frame
+from markerplace.scan.nerfstudio import read_nerfstudio
+from markerplace.scan.sevenscenes import GRAVITY_FILE, read_7scenes, read_gravity
+from markerplace.scan.stray import STRAY_UP, STRAY_UP_SOURCE, read_stray
 from markerplace.scan.tum import TUM_MAX_DT, read_tum
+from markerplace.scan.up import (SPREAD_WARN_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_cameras, parse_up,
+                                 world_from_input)
 from markerplace.runtime.atomic_io import write_image, write_json
 
 log = logging.getLogger(__name__)
 
-FORMATS = ("markerplace", "tum")
+FORMATS = ("markerplace", "tum", "7scenes", "nerfstudio", "stray")
 MARKERPLACE_DEPTH_SCALE = 1000.0
 """Depth PNG units per metre of the markerplace layout (millimetres)."""
 
 
 def detect_format(root: Path) -> str:
-    """``"markerplace"`` when ``poses.txt`` or ``intrinsics.json`` exists, ``"tum"`` when ``rgb.txt``
-    or ``depth.txt`` does; :class:`UserError` otherwise."""
+    """The layout of a folder, by the files it has: ``"markerplace"`` (``poses.txt`` or
+    ``intrinsics.json``), ``"tum"`` (``rgb.txt`` or ``depth.txt``), ``"7scenes"``
+    (``frame-*.pose.txt``), ``"nerfstudio"`` (``transforms.json``), ``"stray"``
+    (``odometry.csv``); :class:`UserError` otherwise."""
     root = Path(root)
     if (root / "poses.txt").exists() or (root / "intrinsics.json").exists():
         return "markerplace"
     if (root / "rgb.txt").exists() or (root / "depth.txt").exists():
         return "tum"
+    if any(root.glob("frame-*.pose.txt")):
+        return "7scenes"
+    if (root / "transforms.json").exists():
+        return "nerfstudio"
+    if (root / "odometry.csv").exists():
+        return "stray"
     raise UserError(
         f"{root} is not an RGB-D frame folder: expected intrinsics.json + poses.txt + color/ + depth/ "
-        "(markerplace layout, see docs/rgbd_layout.md) or rgb.txt + depth.txt + groundtruth.txt (TUM)"
+        "(markerplace layout, see docs/rgbd_layout.md), rgb.txt + depth.txt + groundtruth.txt (TUM), "
+        "frame-NNNNNN.pose.txt (7-Scenes), transforms.json (nerfstudio) or odometry.csv (Stray Scanner)"
     )
 
 
@@ -91,18 +111,61 @@ def read_markerplace(root: Path) -> FrameSet:
     return FrameSet(root, "markerplace", intrinsics, scale, tuple(frames))
 
 
+READERS = {"markerplace": read_markerplace, "7scenes": read_7scenes, "nerfstudio": read_nerfstudio, "stray": read_stray}
+
+
+def layout_up(fs: FrameSet) -> tuple[np.ndarray, str] | None:
+    """(unit up in the input's world, source) when the layout says where up is, else None:
+    the markerplace layout is z up, Stray Scanner's ARKit world y up, a 7-Scenes sequence with
+    ``gravity-direction.txt`` minus gravity."""
+    if fs.format == "markerplace":
+        return np.array([0.0, 0.0, 1.0]), "layout (z up)"
+    if fs.format == "stray":
+        return np.array(STRAY_UP), STRAY_UP_SOURCE
+    if fs.format == "7scenes":
+        g = read_gravity(fs.root)
+        if g is not None:
+            return g, GRAVITY_FILE
+    return None
+
+
+def orient(fs: FrameSet, up=None) -> FrameSet:
+    """``fs`` (poses as written) turned so that its up axis is +z: ``up`` (``--up``) if given,
+    else the layout's (:func:`layout_up`), else the cameras' estimate; logged."""
+    if up is not None:
+        vec, source = parse_up(up), "--up"
+    elif (lu := layout_up(fs)) is not None:
+        vec, source = lu
+    else:
+        vec, spread = estimate_up_from_cameras([r.world_from_cam for r in fs.frames])
+        source = UP_SOURCE_CAMERAS
+        (log.warning if spread > SPREAD_WARN_DEG else log.info)(
+            "%s: up axis estimated from %d cameras' down axes: (%.3f, %.3f, %.3f), spread %.1f deg%s", fs.root,
+            len(fs.frames), *vec, spread, "; the cameras were not held level, check the result or give --up"
+            if spread > SPREAD_WARN_DEG else "")
+    T = world_from_input(vec)
+    log.info("%s: up axis from %s: (%.3f, %.3f, %.3f) in the input world, turned %.1f deg to +z", fs.root, source, *vec,
+             angle_deg(vec, [0.0, 0.0, 1.0]))
+    if np.array_equal(T, np.eye(4)):
+        return replace(fs, up_source=source, world_from_input=T)
+    frames = tuple(replace(r, world_from_cam=T @ r.world_from_cam) for r in fs.frames)
+    return replace(fs, frames=frames, up_source=source, world_from_input=T)
+
+
 def open_frameset(root: str | Path, fmt: str = "auto", intrinsics_path: str | Path | None = None,
-                  max_dt: float = TUM_MAX_DT) -> FrameSet:
-    """Read a frame folder in either layout.
+                  max_dt: float = TUM_MAX_DT, up=None) -> FrameSet:
+    """Read a frame folder in any layout, its world turned so that +z is up.
 
     Args:
         root: the folder.
-        fmt: ``"auto"`` (detect), ``"markerplace"`` or ``"tum"``.
+        fmt: ``"auto"`` (detect) or one of :data:`FORMATS`.
         intrinsics_path: JSON intrinsics for the TUM layout (ignored, with a warning, otherwise).
         max_dt: TUM association window, seconds.
+        up: the up direction in the input's world (``"z"``, ``"-y"``, ``"0,0.9,0.4"`` or three
+            numbers); None = the layout's, else estimated from the cameras (:func:`orient`).
 
     Raises:
-        UserError: missing folder or files, malformed lines, non-rigid poses, no frames.
+        UserError: missing folder or files, malformed lines, non-rigid poses, no frames, bad ``up``.
     """
     root = Path(root)
     if not root.exists():
@@ -110,59 +173,21 @@ def open_frameset(root: str | Path, fmt: str = "auto", intrinsics_path: str | Pa
     if not root.is_dir():
         raise UserError(f"{root} is not a folder (give the folder that holds the frames)")
     if fmt not in ("auto", *FORMATS):
-        raise UserError(f"--format {fmt!r}: choose auto, {' or '.join(FORMATS)}")
+        raise UserError(f"--format {fmt!r}: choose auto, {', '.join(FORMATS)}")
+    if up is not None:
+        parse_up(up)  # a bad --up fails before any file is read
     if fmt == "auto":
         fmt = detect_format(root)
     if fmt == "tum":
         fs = read_tum(root, intrinsics_path, max_dt)
     else:
         if intrinsics_path is not None:
-            log.warning("--intrinsics is for the TUM layout; %s uses its own intrinsics.json", root)
-        fs = read_markerplace(root)
+            log.warning("--intrinsics is for the TUM layout; %s uses its own camera files", root)
+        fs = READERS[fmt](root)
     if not fs.frames:
         hint = " (no colour/depth/pose triple within the time window)" if fmt == "tum" else ""
         raise UserError(f"{root}: no frames{hint}")
-    return fs
-
-
-def load_frame(fs: FrameSet, rec: FrameRecord) -> tuple[np.ndarray, np.ndarray]:
-    """Read one frame's images and check them against the frame set's intrinsics.
-
-    Returns:
-        rgb (H, W, 3) uint8 and depth (H, W) uint16 in ``fs.depth_scale`` units per metre.
-
-    Raises:
-        UserError: missing or unreadable file, wrong size, colour not 8-bit, depth not 16-bit
-            single-channel.
-    """
-    import cv2
-    from PIL import Image
-
-    W, H = fs.intrinsics.width, fs.intrinsics.height
-    for p, what in ((rec.color_path, "colour"), (rec.depth_path, "depth")):
-        if not p.is_file():
-            raise UserError(f"frame {rec.name}: {what} image {p} not found")
-    depth = cv2.imread(str(rec.depth_path), cv2.IMREAD_UNCHANGED)
-    if depth is None:
-        raise UserError(f"frame {rec.name}: cannot read depth image {rec.depth_path} (not an image?)")
-    if depth.dtype != np.uint16 or depth.ndim != 2:
-        kind = f"{depth.dtype} with {1 if depth.ndim == 2 else depth.shape[2]} channel(s)"
-        raise UserError(f"frame {rec.name}: depth image {rec.depth_path} is {kind}; it must be a 16-bit single-channel PNG")
-    if depth.shape != (H, W):
-        raise UserError(f"frame {rec.name}: depth image {rec.depth_path} is {depth.shape[1]}x{depth.shape[0]}, the intrinsics say {W}x{H}")
-    try:
-        with Image.open(rec.color_path) as img:
-            mode = img.mode
-            if mode not in ("RGB", "RGBA", "L", "LA", "P"):
-                raise UserError(f"frame {rec.name}: colour image {rec.color_path} has mode {mode}; it must be 8-bit RGB")
-            rgb = np.asarray(img.convert("RGB"))
-    except UserError:
-        raise
-    except Exception as err:  # PIL raises many kinds on corrupt files
-        raise UserError(f"frame {rec.name}: cannot read colour image {rec.color_path} ({err.__class__.__name__})") from None
-    if rgb.shape[:2] != (H, W):
-        raise UserError(f"frame {rec.name}: colour image {rec.color_path} is {rgb.shape[1]}x{rgb.shape[0]}, the intrinsics say {W}x{H}")
-    return np.ascontiguousarray(rgb), depth
+    return orient(fs, up)
 
 
 class FrameWriter:
@@ -216,5 +241,6 @@ class FrameWriter:
         self.close()
 
 
-__all__ = ["FORMATS", "MARKERPLACE_DEPTH_SCALE", "detect_format", "read_markerplace", "open_frameset", "load_frame",
+__all__ = ["FORMATS", "MARKERPLACE_DEPTH_SCALE", "READERS", "detect_format", "read_markerplace", "layout_up", "orient",
+           "open_frameset", "load_frame",
            "FrameWriter"]

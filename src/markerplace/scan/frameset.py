@@ -1,8 +1,11 @@
-"""RGB-D frame sets in memory, and the parsing both on-disk layouts share.
+"""RGB-D frame sets in memory, and the parsing the on-disk layouts share.
 
 * :class:`FrameRecord` (one frame: colour and depth paths, (4, 4) float64 ``world_from_cam``,
-  OpenCV camera x right, y down, z forward; world metres) and :class:`FrameSet` (frames, one
-  pinhole :class:`~markerplace.geometry.Intrinsics` in pixels, depth PNG units per metre);
+  OpenCV camera x right, y down, z forward; world metres, +z up once opened; optionally its own
+  pinhole :class:`~markerplace.geometry.Intrinsics` and lens :class:`Distortion`) and
+  :class:`FrameSet` (frames, the set's pinhole intrinsics in pixels, depth PNG units per metre,
+  where its up axis came from and the (4, 4) rotation applied to the input's world);
+* :func:`frame_intrinsics`: the pinhole camera of a frame's (undistorted) images;
 * :func:`check_rigid`: a pose's rotation must be orthonormal with determinant +1 within
   :data:`ROTATION_TOLERANCE` (then re-orthonormalized) and its last row ``0 0 0 1``;
 * ``intrinsics.json`` reading and writing (``width, height, fx, fy, cx, cy`` pixels, optional
@@ -10,8 +13,9 @@
 * text-file helpers (comment-stripped lines, numbers) whose errors name the file and line.
 
 The layouts themselves: :mod:`markerplace.scan.frames` (markerplace layout, reading and writing,
-and :func:`~markerplace.scan.frames.open_frameset` for either layout) and
-:mod:`markerplace.scan.tum` (TUM RGB-D). Every problem raises
+and :func:`~markerplace.scan.frames.open_frameset` for every layout), :mod:`markerplace.scan.tum`
+(TUM RGB-D), :mod:`markerplace.scan.sevenscenes` (7-Scenes), :mod:`markerplace.scan.nerfstudio`
+(``transforms.json``) and :mod:`markerplace.scan.stray` (Stray Scanner). Every problem raises
 :class:`~markerplace.errors.UserError` with one line that names the file (and line) at fault.
 """
 
@@ -19,7 +23,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
@@ -37,32 +41,67 @@ FRAME_NAME_RE = re.compile(r"^[^\s/\\]+$")
 
 
 @dataclass(frozen=True)
+class Distortion:
+    """Lens distortion of a frame's colour (and depth) image, removed when the frame is loaded.
+
+    Attributes:
+        model: ``"opencv"`` (coefficients k1, k2, p1, p2, k3 as ``cv2.undistort`` takes them) or
+            ``"fisheye"`` (k1, k2, k3, k4 as ``cv2.fisheye.undistortImage`` takes them).
+        coeffs: the coefficients.
+    """
+
+    model: str
+    coeffs: tuple[float, ...]
+
+    @property
+    def is_zero(self) -> bool:
+        """All coefficients are 0 (a pinhole camera)."""
+        return not any(self.coeffs)
+
+
+@dataclass(frozen=True)
 class FrameRecord:
     """One RGB-D frame of a frame set.
 
     Attributes:
-        name: frame name (markerplace layout) or colour timestamp as written (TUM).
-        color_path: 8-bit colour PNG.
-        depth_path: 16-bit depth PNG.
+        name: frame name (markerplace layout, 7-Scenes ``frame-NNNNNN``, Stray ``NNNNNN``),
+            colour timestamp as written (TUM) or ``file_path`` (nerfstudio).
+        color_path: 8-bit colour image (PNG or JPEG), or the video holding it (``color_index``).
+        depth_path: 16-bit depth PNG; None when the frame has no depth (nerfstudio).
         world_from_cam: (4, 4) float64 pose, OpenCV camera frame, metres.
+        intrinsics: this frame's pinhole camera (pixels, of the undistorted colour image); None
+            = the set's (:func:`frame_intrinsics`).
+        distortion: lens distortion of the stored images; None = none.
+        color_index: frame number in the video ``color_path``; None = an image file.
+        confidence_path: 8-bit confidence PNG at the depth image's size (Stray: 0, 1, 2); depth
+            readings below :data:`CONFIDENCE_MIN` are dropped. None = no confidence map.
     """
 
     name: str
     color_path: Path
-    depth_path: Path
+    depth_path: Path | None
     world_from_cam: np.ndarray
+    intrinsics: Intrinsics | None = None
+    distortion: Distortion | None = None
+    color_index: int | None = None
+    confidence_path: Path | None = None
 
 
 @dataclass(frozen=True)
 class FrameSet:
-    """Frames with poses and one camera model.
+    """Frames with poses and a camera model.
 
     Attributes:
         root: the frame folder.
-        format: ``"markerplace"`` or ``"tum"``.
-        intrinsics: pinhole model of both images (pixels).
+        format: ``"markerplace"``, ``"tum"``, ``"7scenes"``, ``"nerfstudio"`` or ``"stray"``.
+        intrinsics: pinhole model of the (undistorted) colour image and of the depth delivered
+            by :func:`~markerplace.scan.frames.load_frame` (pixels), for frames without their own.
         depth_scale: depth PNG units per metre.
         frames: the frames, in order.
+        up_source: where the up axis came from (``"--up"``, ``"gravity-direction.txt"``,
+            ``"layout (z up)"``, ``"estimated from the cameras' down axes"``, ...).
+        world_from_input: (4, 4) rotation applied to the input's world to make +z up:
+            ``frames[i].world_from_cam = world_from_input @ (pose as written)``.
     """
 
     root: Path
@@ -70,6 +109,18 @@ class FrameSet:
     intrinsics: Intrinsics
     depth_scale: float
     frames: tuple[FrameRecord, ...]
+    up_source: str = "input world as written"
+    world_from_input: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+
+CONFIDENCE_MIN = 1
+"""Depth readings whose confidence is below this are dropped (Stray: 0 low, 1 medium, 2 high)."""
+
+
+def frame_intrinsics(fs: FrameSet, rec: FrameRecord) -> Intrinsics:
+    """The pinhole camera of ``rec``'s images as :func:`~markerplace.scan.frames.load_frame`
+    returns them: the frame's own, else the set's."""
+    return rec.intrinsics if rec.intrinsics is not None else fs.intrinsics
 
 
 def check_rigid(T: np.ndarray, where: str) -> np.ndarray:
@@ -156,5 +207,5 @@ def intrinsics_dict(intrinsics: Intrinsics, depth_scale: float) -> dict:
             "depth_scale": float(depth_scale)}
 
 
-__all__ = ["FrameRecord", "FrameSet", "ROTATION_TOLERANCE", "FRAME_NAME_RE", "check_rigid", "parse_numbers", "data_lines",
+__all__ = ["Distortion", "FrameRecord", "FrameSet", "CONFIDENCE_MIN", "frame_intrinsics", "ROTATION_TOLERANCE", "FRAME_NAME_RE", "check_rigid", "parse_numbers", "data_lines",
            "read_intrinsics", "intrinsics_dict"]

@@ -13,13 +13,17 @@ cubes), which gives the same kind of mesh on 0.18-0.20.
 
 Frames: poses are ``world_from_cam`` (OpenCV camera x right, y down, z forward); the mesh is in
 the poses' world frame, metres. Depth images are planar, uint16 in ``depth_scale`` units per metre.
+Each frame may have its own pinhole camera (``TSDFFusion.integrate(..., intrinsics=)``).
+
+:func:`refine_up`: when the frame set's up axis was only estimated from the cameras, the fused
+mesh's floors and table tops (:func:`~markerplace.scan.up.estimate_up_from_mesh`) refine it.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +33,8 @@ from markerplace.geometry import Intrinsics, invert
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.progress import track
 from markerplace.scan.frames import load_frame
+from markerplace.scan.frameset import FrameSet, frame_intrinsics
+from markerplace.scan.up import MESH_REFINE_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_mesh, world_from_input
 
 log = logging.getLogger(__name__)
 
@@ -115,14 +121,7 @@ class TSDFFusion:
         self._o3d = o3d
         self.config = config
         self.intrinsics = intrinsics
-        # Open3D reads the depth pixel int(u) of a voxel's projection u (pixel i spans [i, i + 1));
-        # ours has pixel centres at integers (OpenCV). Shifting the principal point by half a
-        # pixel makes int(u + 0.5) the nearest pixel; without it, slanted surfaces move by half
-        # a pixel's depth change (about 9 mm on a 45 deg wall 2 m away at 100 px focal length).
-        K = np.asarray(intrinsics.K, dtype=np.float64).copy()
-        K[0, 2] += 0.5
-        K[1, 2] += 0.5
-        self._K = o3d.core.Tensor(K)
+        self._K = self._o3d_K(intrinsics)
         self._grid = o3d.t.geometry.VoxelBlockGrid(
             attr_names=("tsdf", "weight", "color"),
             attr_dtypes=(o3d.core.float32, o3d.core.float32, o3d.core.float32),
@@ -134,7 +133,18 @@ class TSDFFusion:
         )
         self.frames = 0
 
-    def integrate(self, rgb: np.ndarray, depth: np.ndarray, depth_scale: float, world_from_cam: np.ndarray) -> bool:
+    def _o3d_K(self, intrinsics: Intrinsics):
+        # Open3D reads the depth pixel int(u) of a voxel's projection u (pixel i spans [i, i + 1));
+        # ours has pixel centres at integers (OpenCV). Shifting the principal point by half a
+        # pixel makes int(u + 0.5) the nearest pixel; without it, slanted surfaces move by half
+        # a pixel's depth change (about 9 mm on a 45 deg wall 2 m away at 100 px focal length).
+        K = np.asarray(intrinsics.K, dtype=np.float64).copy()
+        K[0, 2] += 0.5
+        K[1, 2] += 0.5
+        return self._o3d.core.Tensor(K)
+
+    def integrate(self, rgb: np.ndarray, depth: np.ndarray, depth_scale: float, world_from_cam: np.ndarray,
+                  intrinsics: Intrinsics | None = None) -> bool:
         """Fuse one frame.
 
         Args:
@@ -142,12 +152,17 @@ class TSDFFusion:
             depth: (H, W) uint16 planar depth, ``depth_scale`` units per metre, 0 = no reading.
             depth_scale: depth units per metre (1000 for millimetres).
             world_from_cam: (4, 4) camera pose.
+            intrinsics: this frame's pinhole camera; None = the one given to the constructor.
 
         Returns:
             False when the frame has no depth reading within ``depth_max`` (nothing fused).
         """
         o3d = self._o3d
-        H, W = self.intrinsics.height, self.intrinsics.width
+        if intrinsics is None or intrinsics == self.intrinsics:
+            intrinsics, K = self.intrinsics, self._K
+        else:
+            K = self._o3d_K(intrinsics)
+        H, W = intrinsics.height, intrinsics.width
         if depth.shape != (H, W) or rgb.shape[:2] != (H, W):
             raise ValueError(f"frame of {depth.shape} / {rgb.shape} does not match the intrinsics {W}x{H}")
         limit = self.config.depth_max * depth_scale
@@ -158,13 +173,13 @@ class TSDFFusion:
         ext = o3d.core.Tensor(invert(np.asarray(world_from_cam, dtype=np.float64)))
         mult = self.config.trunc_multiplier
         try:
-            blocks = self._grid.compute_unique_block_coordinates(dep, self._K, ext, float(depth_scale),
+            blocks = self._grid.compute_unique_block_coordinates(dep, K, ext, float(depth_scale),
                                                                  float(self.config.depth_max), mult)
         except RuntimeError as err:  # Open3D samples the depth image: a few far readings may touch no block
             if "No block is touched" not in str(err):
                 raise
             return False
-        self._grid.integrate(blocks, dep, col, self._K, ext, float(depth_scale), float(self.config.depth_max), mult)
+        self._grid.integrate(blocks, dep, col, K, ext, float(depth_scale), float(self.config.depth_max), mult)
         self.frames += 1
         return True
 
@@ -221,14 +236,22 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     """
     config.validate()
     frames = fs.frames[:: int(config.every)]
+    no_depth = sum(rec.depth_path is None for rec in frames)
+    if no_depth == len(frames):
+        raise UserError(f"{fs.root}: no depth images ({fs.format} layout{': no frame has a depth_file_path' if fs.format == 'nerfstudio' else ''}); "
+                        "fusion needs depth")
+    if no_depth:
+        log.warning("%d of %d frames have no depth image and are skipped", no_depth, len(frames))
     fusion = TSDFFusion(fs.intrinsics, config)
     t0 = time.perf_counter()
     empty = 0
     for rec in track(frames, "fuse", "frame", progress):
+        if rec.depth_path is None:
+            continue
         rgb, depth = load_frame(fs, rec)
-        if not fusion.integrate(rgb, depth, fs.depth_scale, rec.world_from_cam):
+        if not fusion.integrate(rgb, depth, fs.depth_scale, rec.world_from_cam, frame_intrinsics(fs, rec)):
             empty += 1
-    if empty == len(frames):
+    if empty == len(frames) - no_depth:
         raise UserError(f"{fs.root}: no frame has a depth reading within --depth-max {config.depth_max:g} m; "
                         f"check the depth scale ({fs.depth_scale:g} units per metre)")
     if empty:
@@ -241,6 +264,41 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
         raise UserError(f"{fs.root}: fusion produced no surface; check the depth scale "
                         f"({fs.depth_scale:g} units per metre), --depth-max and the poses")
     return mesh
+
+
+def refine_up(fs: FrameSet, mesh):
+    """Refine an up axis estimated from the cameras with the fused mesh's floors and table tops.
+
+    Only when ``fs.up_source`` is the camera estimate, and only when the mesh estimate
+    (:func:`~markerplace.scan.up.estimate_up_from_mesh` around +z) is within
+    :data:`~markerplace.scan.up.MESH_REFINE_DEG` of it; logged either way.
+
+    Returns:
+        (frame set, mesh): both turned by the minimal rotation taking the mesh's up to +z
+        (``world_from_input`` and ``up_source`` updated), or the inputs unchanged.
+    """
+    import open3d as o3d
+
+    if fs.up_source != UP_SOURCE_CAMERAS or len(mesh.triangles) == 0:
+        return fs, mesh
+    if not mesh.has_vertex_normals():
+        mesh.compute_vertex_normals()
+    up = estimate_up_from_mesh(np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals))
+    if up is None:
+        log.info("up axis: too few upward-facing surfaces in the mesh to refine the cameras' estimate")
+        return fs, mesh
+    tilt = angle_deg(up, [0.0, 0.0, 1.0])
+    if tilt > MESH_REFINE_DEG:
+        log.warning("up axis: the mesh's floors/table tops are %.1f deg from the cameras' estimate (over %.0f deg): "
+                    "estimate kept; give --up if the floor is not level", tilt, MESH_REFINE_DEG)
+        return fs, mesh
+    T = world_from_input(up)
+    out = o3d.geometry.TriangleMesh(mesh)
+    out.rotate(T[:3, :3], center=(0.0, 0.0, 0.0))
+    frames = tuple(replace(r, world_from_cam=T @ r.world_from_cam) for r in fs.frames)
+    source = f"{UP_SOURCE_CAMERAS}, refined by the mesh's horizontal surfaces"
+    log.info("up axis refined by the mesh's floors/table tops: turned %.2f deg", tilt)
+    return replace(fs, frames=frames, up_source=source, world_from_input=T @ fs.world_from_input), canonical_mesh(out)
 
 
 def write_mesh_ply(mesh, path: str | Path) -> None:
