@@ -1,8 +1,8 @@
-"""A short handheld-like RGB-D sequence of the built-in ``tiny`` room (3.6 m x 3.6 m, walls
-at x, y = 0 and 3.6) written in the markerplace layout, for the ``plan --frames`` tests.
+"""A short handheld-like RGB-D sequence of the built-in ``tiny`` room (inner wall faces
+at x, y = 0.05 and 3.55) written in the markerplace layout, for the ``plan --frames`` tests.
 
 The camera walks a loop 0.9 m inside the walls at 1.3-1.6 m, looking outwards at the walls
-(yaw turning with the loop), pitched -15..+10 degrees and rolled a few degrees: 6-DoF poses, none
+(yaw turning with the loop), pitched -35..+10 degrees and rolled a few degrees: 6-DoF poses, none
 level. Frames come from the scan simulator (:class:`~markerplace.scan.simulate.FrameSimulator`:
 rendered colour, noisy Kinect-like depth in millimetres), 320 x 240.
 """
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-TINY_WALLS = (0.0, 3.6)
-"""The ``tiny`` room's inner wall planes (x and y), metres."""
+TINY_WALLS = (0.05, 3.55)
+"""The ``tiny`` room's inner wall faces (x and y), metres."""
 
 
 def tiny_poses(n: int = 40) -> np.ndarray:
@@ -28,7 +28,7 @@ def tiny_poses(n: int = 40) -> np.ndarray:
         a = 2 * math.pi * j / n
         pos = np.array([c + 0.9 * math.cos(a), c + 0.9 * math.sin(a), 1.45 + 0.15 * math.sin(3 * a)])
         yaw = a + 0.5 * math.sin(2 * a)
-        pitch = math.radians(-15 + 25 * (0.5 + 0.5 * math.sin(5 * a)))
+        pitch = math.radians(-35 + 45 * (0.5 + 0.5 * math.sin(5 * a)))
         roll = math.radians(4 * math.sin(7 * a))
         out.append(world_from_cam_ypr(pos, yaw, pitch, roll))
     return np.array(out)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -37,7 +38,7 @@ from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization
 from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion
 from markerplace.plan.frames.candidates import frame_candidates
-from markerplace.plan.frames.layout import frames_discretization
+from markerplace.plan.frames.layout import floor_height, frames_discretization
 from markerplace.plan.frames.observe import run_frame_observe
 from markerplace.plan.frames.poses import plan_intrinsics
 from markerplace.plan.frames.surface import FUSE, frames_key, surface_path
@@ -88,10 +89,29 @@ def _indices(fs: FrameSet, frame_indices) -> np.ndarray:
     return idx
 
 
+@contextmanager
+def _quiet_up_axis_check():
+    """Drop the loader's "its floor seems to face another way" warning while this runs."""
+    logger = logging.getLogger("markerplace.scene.loader")
+
+    def keep(record: logging.LogRecord) -> bool:
+        return "seems to face another way" not in record.getMessage()
+
+    logger.addFilter(keep)
+    try:
+        yield
+    finally:
+        logger.removeFilter(keep)
+
+
 def load_surface(fs: FrameSet, idx: np.ndarray, run_dir: Path, mesh, timings: dict, progress: bool):
     """(surface file, the loaded scene, its world offset)."""
     path = surface_path(fs, idx, run_dir, mesh, timings, progress)
-    scene = load_scene(str(path))
+    if mesh is None:  # z up by the frames' contract: a scan of walls only is no reason to suggest --up
+        with _quiet_up_axis_check():
+            scene = load_scene(str(path), up="z")
+    else:
+        scene = load_scene(str(path))
     return path, scene, world_offset(scene)
 
 
@@ -130,11 +150,13 @@ def prepare_frames(fs: FrameSet, frame_indices: np.ndarray, config: PlanConfig, 
     def compute():
         V, F = scene.geometry()
         rc = RayCaster(V, F)
-        cand = frame_candidates(rc, world_from_cam, config.imaging.camera, config.discretize.candidates, tag_size)
+        floor = floor_height(rc, world_from_cam[:, 2, 3], config.discretize.height)
+        cand = frame_candidates(rc, world_from_cam, config.imaging.camera, config.discretize.candidates, tag_size,
+                                floor[0])
         if len(cand.position) == 0:
             raise UserError(f"no candidate tag spots: no flat near-vertical surface seen by the frames holds a "
                             f"{tag_size:g} m tag with open space in front; check --tag-size or the frames")
-        return frames_discretization(rc, world_from_cam, cand, config.discretize.height,
+        return frames_discretization(rc, world_from_cam, cand, floor,
                                      config.discretize.resolution, info)
 
     disc = cached("discretize", run_dir / "discretization.npz", key, compute, save_discretization,

@@ -79,7 +79,7 @@ def _scene_section(doc: dict, num_markers: int) -> str:
     ]
     frames = disc.get("frames")
     if frames:  # plan --frames: the poses are a real sequence's (plan/frames)
-        surface = "fused from those frames" if frames.get("surface") == "fused" else f"the mesh {frames.get('surface')}"
+        surface = "the surface fused from those frames" if frames.get("surface") == "fused" else f"the mesh {frames.get('surface')}"
         facts[5] = ["camera poses", f"{s.get('num_poses', 0)} (the frames' own 6-DoF poses)"]
         facts.insert(1, ["planned from frames", f"{frames.get('count')} of {frames.get('total')} frames (every "
                          f"{frames.get('step')}) of {frames.get('root')}, {frames.get('layout')} layout; tags on "

@@ -12,15 +12,20 @@ they apply (:mod:`markerplace.plan.discretize.wall_candidates`).
    within reach of where the camera was held).
 4. One spot per 5 cm cell and normal octant (first seen wins); each spot's plane is then fitted
    to a 5 x 5 ray grid over the tag square (marching-cubes faces are too noisy for a normal),
-   its centre moved onto that plane; spots whose fitted normal fails 2. are dropped.
+   its centre moved onto that plane; spots whose fitted normal fails 2., or whose samples
+   stray more than half of ``flatness_tol`` from the plane, are dropped.
 5. **Spacing and flatness**: ordered by angle around the camera path's centroid (a closed loop,
    so the ``uniform`` baseline has an arclength), spots are spaced out ``marker_spacing`` apart
    in 3D unless their normals differ by more than ``normal_diff_deg``
    (:func:`~markerplace.plan.discretize.spacing.space_out`), each kept only when a tag and its
-   border lie flat with open space in front (:func:`~markerplace.plan.discretize.candidate_rules.tag_fits`).
+   border lie flat with open space in front (:func:`~markerplace.plan.discretize.candidate_rules.tag_fits`)
+   and the mesh plan's geometric rules pass
+   (:func:`~markerplace.plan.discretize.candidate_rules.surface_shape`: ``off-wall``, a surface
+   standing off the wall such as a cupboard front or a picture, and ``in-opening``; unless
+   ``allow`` names them), with the floor of :func:`~markerplace.plan.frames.layout.floor_height`.
 
-The name rules (doors, windows, pictures...) and the geometric ones (off-wall, in-opening) need
-part names and a ceiling; a fused surface has neither, so they do not apply.
+The name rules (doors, windows, pictures, glass...) need part names; a fused surface has none,
+so they do not apply.
 
 Marker pose: z = the wall normal towards the cameras, y = world up projected on the wall,
 x = y x z (:mod:`markerplace.geometry`). Frames: world z up, metres.
@@ -33,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplace.geometry import Intrinsics
-from markerplace.plan.discretize.candidate_rules import CandidateConfig, tag_fits
+from markerplace.plan.discretize.candidate_rules import GEOMETRIC, CandidateConfig, surface_shape, tag_fits
 from markerplace.plan.discretize.spacing import space_out
 from markerplace.scene.raycast import RayCaster
 
@@ -50,7 +55,9 @@ UP = np.array([0.0, 0.0, 1.0])
 class FrameCandidates:
     """Candidate spots: ``position`` (C, 3) tag centres and ``normal`` (C, 3) unit wall normals
     towards the cameras, ordered by ``arclength`` (C,) along the loop around the camera path
-    (``loop_length`` metres); ``counts``: spots found, spaced out, kept."""
+    (``loop_length`` metres); ``counts``: ``found`` (one per cell and octant), ``spots``
+    (spaced out with no rule), ``kept``, and ``removed``: the spots tested while spacing out
+    that each rule removed (a spot counts under the first)."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -78,10 +85,11 @@ def _facing(n: np.ndarray, p: np.ndarray, cam: np.ndarray, config: CandidateConf
     return (np.abs(n[:, 2]) < config.max_normal_z) & (np.einsum("ij,ij->i", n, to_cam) > np.cos(np.radians(MAX_VIEW_ANGLE_DEG)))
 
 
-def _fit_planes(rc: RayCaster, p: np.ndarray, n: np.ndarray, half: float, standoff: float = 0.3
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _fit_planes(rc: RayCaster, p: np.ndarray, n: np.ndarray, half: float, max_residual: float,
+                standoff: float = 0.3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Plane through a 5 x 5 ray grid of +-``half`` around each spot: centres (M, 3), unit
-    normals (M, 3) on the side of ``n``, and (M,) bool where all 25 rays hit."""
+    normals (M, 3) on the side of ``n``, and (M,) bool where all 25 rays hit within
+    ``max_residual`` of the plane (a spot across a step, e.g. a picture's edge, would tilt it)."""
     M = len(p)
     y = UP - n[:, 2:3] * n
     y /= np.maximum(np.linalg.norm(y, axis=1, keepdims=True), 1e-9)
@@ -98,12 +106,14 @@ def _fit_planes(rc: RayCaster, p: np.ndarray, n: np.ndarray, half: float, stando
     normal = vt[:, 2]
     normal *= np.where(np.einsum("ij,ij->i", normal, n) < 0, -1.0, 1.0)[:, None]
     centre = p - np.einsum("ij,ij->i", p - mean, normal)[:, None] * normal
-    return centre, normal, ok
+    residual = np.abs(np.einsum("mkj,mj->mk", hits - mean[:, None], normal)).max(axis=1)
+    return centre, normal, ok & (residual <= max_residual)
 
 
 def frame_candidates(rc: RayCaster, world_from_cam: np.ndarray, intr: Intrinsics, config: CandidateConfig,
-                     tag_size: float) -> FrameCandidates:
-    """Candidate spots seen from the cameras ``world_from_cam`` (N, 4, 4) (module docstring)."""
+                     tag_size: float, floor_z: float) -> FrameCandidates:
+    """Candidate spots seen from the cameras ``world_from_cam`` (N, 4, 4) on the surface of
+    ``rc`` whose floor is at ``floor_z`` (module docstring)."""
     T = np.asarray(world_from_cam, float).reshape(-1, 4, 4)
     o, d, ci = _pixel_rays(T, intr)
     t, f = rc.first_hits(o, d, config.max_scan_range)
@@ -123,7 +133,7 @@ def frame_candidates(rc: RayCaster, world_from_cam: np.ndarray, intr: Intrinsics
     first = np.sort(first)
     p, n, ci = p[first], n[first], ci[first]
     found = len(p)
-    p, n, ok = _fit_planes(rc, p, n, 0.5 * tag_size)
+    p, n, ok = _fit_planes(rc, p, n, 0.5 * tag_size, 0.5 * config.flatness_tol)
     ok &= _facing(n, p, cams[ci], config) & (p[:, 2] >= zlo) & (p[:, 2] <= zhi)
     p, n = p[ok], n[ok]
     centroid = cams[:, :2].mean(axis=0)
@@ -131,13 +141,28 @@ def frame_candidates(rc: RayCaster, world_from_cam: np.ndarray, intr: Intrinsics
     order = np.lexsort((p[:, 2], ang))
     p, n = p[order], n[order]
     cos_diff = np.cos(np.radians(config.normal_diff_deg))
-    kept = np.asarray(space_out(p, n, config.marker_spacing, cos_diff,
-                                lambda idx: tag_fits(rc, p[idx], n[idx], config, tag_size=tag_size)), np.int64)
+    removed = {"does not fit": 0, **{g: 0 for g in GEOMETRIC}}
+    rules = [g for g in GEOMETRIC if g not in config.allow]
+
+    def accept(idx: np.ndarray) -> np.ndarray:
+        ok = tag_fits(rc, p[idx], n[idx], config, tag_size=tag_size)
+        removed["does not fit"] += int((~ok).sum())
+        go = idx[ok]
+        if len(go) and rules:
+            shape = surface_shape(rc, p[go], n[go], np.full(len(go), floor_z), config)
+            bad = np.zeros(len(go), bool)
+            for g in rules:
+                removed[g] += int((shape[g] & ~bad).sum())
+                bad |= shape[g]
+            ok[np.flatnonzero(ok)[bad]] = False
+        return ok
+
+    kept = np.asarray(space_out(p, n, config.marker_spacing, cos_diff, accept), np.int64)
     nominal = len(space_out(p, n, config.marker_spacing, cos_diff, lambda idx: np.ones(len(idx), bool)))
     p, n = p[kept], n[kept]
     arc, length = _loop(p[:, :2])
     return FrameCandidates(p, n, arc, length, {"spots": int(nominal), "found": int(found), "kept": int(len(p)),
-                                               "does not fit": int(max(nominal - len(p), 0))})
+                                               "removed": removed})
 
 
 def _loop(xy: np.ndarray) -> tuple[np.ndarray, float]:

@@ -82,12 +82,13 @@ def occupancy_grid(rc: RayCaster, cam_xy: np.ndarray, cand_xy: np.ndarray, floor
     return occ, lo
 
 
-def frames_discretization(rc: RayCaster, world_from_cam: np.ndarray, cand: FrameCandidates, height: float,
+def frames_discretization(rc: RayCaster, world_from_cam: np.ndarray, cand: FrameCandidates, floor: tuple[float, bool],
                           resolution: float, frames_info: dict) -> Discretization:
-    """The frames plan's Discretization (module docstring); ``frames_info`` goes into its
-    summary as ``frames`` (count, layout, folder, step, surface)."""
+    """The frames plan's Discretization (module docstring); ``floor`` is :func:`floor_height`'s
+    answer; ``frames_info`` goes into its summary as ``frames`` (count, layout, folder, step,
+    surface)."""
     f = pose_fields(world_from_cam)
-    floor_z, found = floor_height(rc, f["location_z"], height)
+    floor_z, found = floor
     occ, origin = occupancy_grid(rc, f["locations"], cand.position[:, :2], floor_z, float(f["location_z"].max()),
                                  resolution)
     C = len(cand.position)
@@ -97,7 +98,7 @@ def frames_discretization(rc: RayCaster, world_from_cam: np.ndarray, cand: Frame
         "per_storey": [{"storey": 0, "floor_z": floor_z, "open_floor_m2": free_m2, "free_m2": free_m2,
                         "covered_m2": free_m2, "locations": int(len(f["locations"])), "candidates": C,
                         "unreached": []}],
-        "candidates_removed": {"does not fit": cand.counts["does not fit"]},
+        "candidates_removed": dict(cand.counts["removed"]),
         "wall_spots": cand.counts["spots"], "wall_spots_pass": C, "candidates_crowded": 0, "candidates_added": 0,
         "allow": [],
         "frames": {**frames_info, "floor_found": found,
