@@ -53,3 +53,12 @@ def house():
     from markerplace.scene import load_scene
 
     return load_scene("house")
+
+
+@pytest.fixture(scope="session")
+def tiny_frames(tmp_path_factory):
+    """A 40-frame handheld-like RGB-D sequence of ``tiny`` in the markerplace layout
+    (:mod:`helpers.frames`), written once per session; returns its folder."""
+    from helpers.frames import write_tiny_frames
+
+    return write_tiny_frames(tmp_path_factory.mktemp("frames") / "tiny")

@@ -19,6 +19,7 @@ from markerplace.log import setup_logging
 from markerplace.pipelines.plan import PlanInputs, run_plan
 from markerplace.scene.spec import SceneSpec
 from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_from_args
+from markerplace.cli.plan_frames import add_frames_args, cmd_plan_frames
 import numpy as np
 from markerplace.cli.bounds import check_args
 from markerplace.cli.check import add_check_parser
@@ -91,7 +92,14 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan`, then what it wrote."""
+    """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan` (or, with
+    ``--frames``, :func:`markerplace.cli.plan_frames.cmd_plan_frames`), then what it wrote."""
+    if args.frames is not None or args.scene is None:
+        return cmd_plan_frames(args)
+    frames_only = [f for f, v in (("--mesh", args.mesh), ("--frame-step", args.frame_step),
+                                  ("--intrinsics", args.intrinsics)) if v is not None]
+    if frames_only:
+        raise UserError(f"{frames_only[0]} is an option of plan --frames DIR; a scene was given")
     inputs = PlanInputs(existing=args.existing, exclude=args.exclude, where=args.where, paper=args.paper,
                         with_map=args.with_map, force=args.force, adopt=args.adopt, progress=not args.quiet)
     scene = SceneSpec(args.scene, args.up, args.unit_scale, args.seed)
@@ -147,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
     p_plan = sub.add_parser("plan", help=f"place k markers ({', '.join(PLACEMENT_METHODS)}) and write the plan")
-    add_scene_args(p_plan)
+    add_scene_args(p_plan, optional="give --frames DIR instead")
+    add_frames_args(p_plan)
     p_plan.add_argument("--out", required=True, help="run directory (stages are cached here and reused)")
     p_plan.add_argument("--config", default=None, metavar="FILE",
                         help="settings from a TOML file (tables as in config.json: [discretize], "

@@ -64,10 +64,13 @@ def plan_instructions(scene, placement, disc, height: float, surfaces: Sequence 
     The floor under a tag is the plan's: a candidate's centre stands ``height`` (``--height``)
     above the storey's floor map in front of its wall (furniture tops are not floor there), so
     the floor is the tag's z minus ``height``; its storey is its candidate's.
+    A frames plan (``plan --frames``) hangs tags at any height: the floor is its storey's.
     """
     t0 = time.perf_counter()
     storeys = [int(disc.candidate_storey[int(c)]) for c in placement.candidates]
     floors = [float(m.position[2]) - float(height) for m in placement.markers]
+    if disc.summary.get("frames"):  # plan --frames: tags at any height; the floor is the storey's (plan/frames/layout)
+        floors = [float(disc.storeys[s]) for s in storeys]
     out = install_instructions(scene, placement.markers, storeys, [float(disc.storeys[s]) for s in storeys], floors,
                                surfaces)
     log.info("instructions: %d tags measured on the model (walls, corners, door edges) in %.1f s", len(out),

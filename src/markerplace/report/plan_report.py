@@ -77,6 +77,13 @@ def _scene_section(doc: dict, num_markers: int) -> str:
          _removed_words(removed, float((doc.get("markers") or [{}])[0].get("size", 0.4)))],
         ["candidate spots competing", s.get("num_candidates", "?")],
     ]
+    frames = disc.get("frames")
+    if frames:  # plan --frames: the poses are a real sequence's (plan/frames)
+        surface = "the surface fused from those frames" if frames.get("surface") == "fused" else f"the mesh {frames.get('surface')}"
+        facts[5] = ["camera poses", f"{s.get('num_poses', 0)} (the frames' own 6-DoF poses)"]
+        facts.insert(1, ["planned from frames", f"{frames.get('count')} of {frames.get('total')} frames (every "
+                         f"{frames.get('step')}) of {frames.get('root')}, {frames.get('layout')} layout; tags on "
+                         f"{surface}; camera path on camera_path.png"])
     unreached = [f"storey {p['storey']}: {u['area_m2']:.1f} m^2 around ({u['centre'][0]:.1f}, {u['centre'][1]:.1f})"
                  for p in per for u in p.get("unreached", [])]
     note = ("<p class=\"note\">Floor regions without cameras (reached only through a gap narrower than a person, "
@@ -109,7 +116,9 @@ def _scores_section(s: dict) -> str:
 
 
 def _maps_section(out_dir: Path) -> str:
-    figs = [("placement.png", "The plan: numbered tags (arrows point where each tag faces) over the scores "
+    figs = [("camera_path.png", "Planned from frames: the frames' camera path (blue, arrows = headings), candidate "
+             "spots (orange) and the tags (red, numbered); grey = surface, white = where the cameras went."),
+            ("placement.png", "The plan: numbered tags (arrows point where each tag faces) over the scores "
              "after placement; one panel per storey."),
             ("scores.png", "Scores without markers (dark = low); blue ticks are candidate spots."),
             ("gain_first.png", "Information gain of the first tag (dark = high)."),

@@ -147,12 +147,15 @@ class SurfaceLabels:
 
 
 def _tag_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The tag's frame for (M, 3) wall normals: unit n, x = up x n (the right of a viewer facing
-    the wall) and y = up, each (M, 3)."""
+    """The tag's frame for (M, 3) near-vertical wall normals: unit n, y = world up projected on
+    the wall and x = y x n (the right of a viewer facing the wall), each (M, 3). For horizontal
+    normals (the mesh plan's) y is world up exactly."""
     n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    x = np.cross(np.tile(UP, (len(n), 1)), n)
+    y = np.tile(UP, (len(n), 1)) - n[:, 2:3] * n
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.cross(y, n)
     x /= np.linalg.norm(x, axis=1, keepdims=True)
-    return n, x, np.tile(UP, (len(n), 1))
+    return n, x, y
 
 
 def tag_fits(rc: RayCaster, centers: np.ndarray, normals: np.ndarray, config: CandidateConfig,

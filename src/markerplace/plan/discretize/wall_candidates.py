@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -57,6 +56,7 @@ from markerplace.plan.discretize.candidate_rules import (ALLOWABLE, GEOMETRIC, R
                               tag_fits)
 from markerplace.plan.discretize.floorplan import StoreyFloor
 from markerplace.plan.discretize.grid import Grid
+from markerplace.plan.discretize.spacing import space_out as _space_out
 from markerplace.scene.raycast import RayCaster
 from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.scene.semantics import CATEGORIES, PartKind
@@ -138,36 +138,6 @@ def _scan_points(rc: RayCaster, origins: np.ndarray, config: CandidateConfig, ba
     if not hit_xy:
         return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros((0, 2))
     return np.concatenate(hit_xy), np.concatenate(faces), np.concatenate(org)
-
-
-def _space_out(xy: np.ndarray, n2: np.ndarray, spacing: float, cos_diff: float,
-               accept: Callable[[np.ndarray], np.ndarray], batch: int = 32) -> list[int]:
-    """Greedy uniform downsampling in the given order: keep a point unless a kept point with a
-    similar normal is closer than ``spacing``; ``accept(indices) -> bool`` is asked in batches
-    and a refused point does not block its neighbours."""
-    kept: list[int] = []
-    i, P = 0, len(xy)
-    while i < P:
-        idx: list[int] = []
-        KX, KN = xy[kept].reshape(-1, 2), n2[kept].reshape(-1, 2)
-        while i < P and len(idx) < batch:
-            if len(KX) and np.any((np.linalg.norm(KX - xy[i], axis=1) < spacing) & (KN @ n2[i] >= cos_diff)):
-                i += 1
-                continue
-            if idx and np.any((np.linalg.norm(xy[idx] - xy[i], axis=1) < spacing) & (n2[idx] @ n2[i] >= cos_diff)):
-                break  # decided after this batch is accepted or refused
-            idx.append(i)
-            i += 1
-        if not idx:
-            continue
-        ok = accept(np.asarray(idx))
-        for k, good in zip(idx, ok):
-            if not good:
-                continue
-            if kept and np.any((np.linalg.norm(xy[kept] - xy[k], axis=1) < spacing) & (n2[kept] @ n2[k] >= cos_diff)):
-                continue
-            kept.append(k)
-    return kept
 
 
 def _storey_spots(rc: RayCaster, grid: Grid, floor: StoreyFloor, free: np.ndarray, locations: np.ndarray,
