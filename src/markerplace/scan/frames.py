@@ -144,7 +144,7 @@ def orient(fs: FrameSet, up=None) -> FrameSet:
             len(fs.frames), *vec, spread, "; the cameras' up axes spread widely: check the result or give --up"
             if spread > SPREAD_WARN_DEG else "")
     T = world_from_input(vec)
-    log.info("%s: up axis from %s: (%.3f, %.3f, %.3f) in the input world, turned %.1f deg to +z", fs.root, source, *vec,
+    log.info("%s: up axis (%s): (%.3f, %.3f, %.3f) in the input world, turned %.1f deg to +z", fs.root, source, *vec,
              angle_deg(vec, [0.0, 0.0, 1.0]))
     if np.array_equal(T, np.eye(4)):
         return replace(fs, up_source=source, world_from_input=T)
