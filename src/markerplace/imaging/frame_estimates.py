@@ -89,9 +89,11 @@ def estimate_blur_sigma(image: np.ndarray) -> float:
     noise's expected share of ``m1**2`` and ``m2**2`` (the frame's :func:`estimate_noise_sigma`
     squared times each gradient's response energy) is taken out, the median ratio inverted to
     ``s``, and the blur is ``sqrt(s**2 - BLUR_PROBE**2 - 1/12)`` (1/12: the variance of a pixel's
-    box, which the compositor's supersampled coverage has already). Texture and nearby edges
-    bias it (a frame without clean edges reads sharper). Measured on area-sampled synthetic edge
-    images blurred by 0.7-3 px with 0-8 DN of noise: within 15 % (the tests ask for 30 %).
+    box, which the compositor's supersampled coverage has already). Central differences leave
+    a bias of about 0.1 px^2 in variance that depends on edge orientation (axis-aligned edges
+    read +0.11, round ones -0.07: a sharp frame reads 0-0.35 px); texture and nearby edges bias
+    it too (a frame without clean edges reads sharper). Measured on area-sampled synthetic edge
+    images blurred by 0.7-4 px with 0-8 DN of noise: within 15 % (the tests ask for 30 %).
     Returns 0 when there are fewer than 20 edge pixels (a blank frame).
 
     Args:
