@@ -29,18 +29,25 @@ def wall_depth(pose: np.ndarray, x_wall: float, shape=(INTR.height, INTR.width))
     return np.where(dx > 1e-9, (x_wall - pose[0, 3]) / np.where(dx > 1e-9, dx, 1.0), 0.0)
 
 
+def box_coverage(shape, x0, y0, x1, y1) -> np.ndarray:
+    """(H, W) exact area coverage of pixels (centres at integers) by the box [x0, x1] x [y0, y1]."""
+    def overlap(n, a, b):
+        c = np.arange(n)
+        return np.clip(np.minimum(b, c + 0.5) - np.maximum(a, c - 0.5), 0.0, 1.0)
+    return np.outer(overlap(shape[0], y0, y1), overlap(shape[1], x0, x1))
+
+
 def textured_frame(seed: int, blur: float = 0.0, noise: float = 0.0, shape=(INTR.height, INTR.width)) -> np.ndarray:
-    """A frame like a photo of a room: smooth shading and colour, a few sharp-edged patches
-    (area-sampled at 8x), then Gaussian ``blur`` (pixels) and Gaussian ``noise`` (DN)."""
+    """A frame like a photo of a room: smooth shading and colour, a few sharp-edged, area-sampled
+    patches, then Gaussian ``blur`` (pixels) and Gaussian ``noise`` (DN)."""
     rng = np.random.default_rng(seed)
     H, W = shape
-    S = 8
-    big = cv2.resize(rng.uniform(90, 170, (6, 8, 3)).astype(np.float32), (W * S, H * S), interpolation=cv2.INTER_CUBIC)
+    img = cv2.resize(rng.uniform(90, 170, (6, 8, 3)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC)
+    img = img.astype(np.float64)
     for _ in range(14):
-        x0, y0 = rng.uniform(0, W - 40) * S, rng.uniform(0, H - 40) * S
-        w, h = rng.uniform(25, 120) * S, rng.uniform(25, 120) * S
-        big[int(y0):int(y0 + h), int(x0):int(x0 + w)] = rng.uniform(30, 230, 3)
-    img = cv2.resize(big, (W, H), interpolation=cv2.INTER_AREA).astype(np.float64)
+        x0, y0 = rng.uniform(0, W - 40), rng.uniform(0, H - 40)
+        cov = box_coverage(shape, x0, y0, x0 + rng.uniform(25, 120), y0 + rng.uniform(25, 120))[..., None]
+        img = img * (1 - cov) + cov * rng.uniform(30, 230, 3)
     if blur > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur)
     img = img + noise * rng.standard_normal(img.shape)
@@ -230,21 +237,24 @@ def test_tag_pixels_get_the_frames_noise():
 
 # ------------------------------------------------------------------------------- estimators
 def edge_image(seed: int, shape=(240, 320), round_: bool = False) -> np.ndarray:
-    """Sharp, area-sampled (8x) step edges on grey: large rectangles, or discs (every orientation)."""
+    """Sharp, area-sampled step edges on grey: large rectangles (exact coverage), or discs
+    (every orientation, sampled 8x)."""
     rng = np.random.default_rng(seed)
-    S = 8
     H, W = shape
-    big = np.full((H * S, W * S), 128.0, np.float32)
-    yy, xx = np.mgrid[:H * S, :W * S] / S if round_ else (None, None)
-    for _ in range(6 if round_ else 10):
-        if round_:
+    if round_:
+        S = 8
+        big = np.full((H * S, W * S), 128.0, np.float32)
+        yy, xx = np.ogrid[:H * S, :W * S]
+        for _ in range(6):
             cx, cy, r = rng.uniform(50, W - 50), rng.uniform(50, H - 50), rng.uniform(20, 45)
-            big[(xx - cx) ** 2 + (yy - cy) ** 2 < r * r] = rng.uniform(20, 235)
-            continue
-        x0, y0 = rng.uniform(0, W - 50) * S, rng.uniform(0, H - 50) * S
-        w, h = rng.uniform(40, 140) * S, rng.uniform(40, 140) * S
-        big[int(y0):int(y0 + h), int(x0):int(x0 + w)] = rng.uniform(20, 235)
-    return cv2.resize(big, (W, H), interpolation=cv2.INTER_AREA).astype(np.float64)
+            big[((xx + 0.5) / S - 0.5 - cx) ** 2 + ((yy + 0.5) / S - 0.5 - cy) ** 2 < r * r] = rng.uniform(20, 235)
+        return cv2.resize(big, (W, H), interpolation=cv2.INTER_AREA).astype(np.float64)
+    img = np.full(shape, 128.0)
+    for _ in range(10):
+        x0, y0 = rng.uniform(0, W - 50), rng.uniform(0, H - 50)
+        cov = box_coverage(shape, x0, y0, x0 + rng.uniform(40, 140), y0 + rng.uniform(40, 140))
+        img = img * (1 - cov) + cov * rng.uniform(20, 235)
+    return img
 
 
 @pytest.mark.parametrize("sigma", [0.7, 1.0, 1.5, 2.5, 4.0])
@@ -290,7 +300,7 @@ def test_config_rejects_unknown_policies():
 
 
 def test_composite_sheet_tiles_frames_under_titles():
-    frames = [textured_frame(s, shape=(480, 640)) for s in range(5)]
+    frames = [np.random.default_rng(s).integers(0, 255, (480, 640, 3), dtype=np.uint8) for s in range(5)]
     sheet = composite_sheet(frames, [f"frame {i}" for i in range(5)], columns=2)
     assert sheet.dtype == np.uint8 and sheet.ndim == 3
     assert sheet.shape[1] == 2 * 320 + 3 * 6 and sheet.shape[0] == 3 * (240 + 22 + 6) + 6
