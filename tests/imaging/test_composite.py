@@ -58,6 +58,13 @@ def facing_marker(tag_id=7, size=0.2, centre=(3.0, 0.1, 1.5)) -> Marker:
     return Marker(tag_id, size, world_from_marker_pose(np.array(centre, float), np.array([-1.0, 0.0, 0.0])))
 
 
+def outer_quad_uv(marker: Marker, pose: np.ndarray) -> np.ndarray:
+    """(4, 2) pixels of the drawn quad's corners (quiet zone included)."""
+    h = outer_size(marker.size) / 2
+    local = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]])
+    return project(K, pose, local @ marker.world_from_marker[:3, :3].T + marker.position)[0]
+
+
 # ------------------------------------------------------------------------------- the renderer
 @pytest.fixture(scope="module")
 def rendered():
@@ -98,11 +105,11 @@ def test_composite_into_a_render_detects_like_the_rendered_tag(rendered, view):
     err_proj = np.linalg.norm(got[0].corners - expected, axis=1)
     assert err_ref.max() < 1.0 and err_proj.max() < 1.0, (err_ref, err_proj)
     # outside the tag's quad (and its blur margin) the frame is untouched
-    uv_out, _ = project(K, pose, marker.corners_world() * 0 + marker.position)
+    pad = int(np.ceil(3 * stats[0].blur_sigma)) + 3
+    quad = outer_quad_uv(marker, pose)
+    lo, hi = np.floor(quad.min(axis=0)).astype(int) - pad, np.ceil(quad.max(axis=0)).astype(int) + pad + 1
     far = np.ones(out.shape[:2], bool)
-    c = np.round(uv_out[0]).astype(int)
-    r = int(np.ceil(np.abs(project(K, pose, marker.corners_world())[0] - uv_out[0]).max() * 1.6)) + 4
-    far[max(c[1] - r, 0):c[1] + r, max(c[0] - r, 0):c[0] + r] = False
+    far[max(lo[1], 0):hi[1], max(lo[0], 0):hi[0]] = False
     assert np.array_equal(out[far], plain.rgb[far])
 
 
@@ -139,9 +146,7 @@ def _occlusion_case(hole_policy: str):
     pose = world_from_cam_pose(np.array([0.0, 0.0, 1.5]), 0.0)
     marker = facing_marker(size=0.3, centre=backproject(K, pose, np.array([[320.0, 240.0]]), np.array([2.5]))[0])
     depth = wall_depth(pose, 2.5)
-    h = outer_size(marker.size) / 2
-    quad = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]]) @ marker.world_from_marker[:3, :3].T
-    uv, _ = project(K, pose, quad + marker.position)
+    uv = outer_quad_uv(marker, pose)
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     assert np.all(np.abs((np.r_[lo, hi] % 1.0) - 0.5) < 0.3)  # edges clear of pixel centres
     vs, us = np.mgrid[:INTR.height, :INTR.width]
