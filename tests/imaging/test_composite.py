@@ -153,7 +153,7 @@ def _occlusion_case(hole_policy: str):
     covered = (us > lo[0]) & (us < hi[0]) & (vs > lo[1]) & (vs < hi[1])
     mid = int(round((lo[0] + hi[0]) / 2))
     depth[:, :mid] = 1.2  # a person in front of the left half
-    depth[150:200, mid:mid + 5] = 2.5 - 0.031  # just past the margin: hidden
+    depth[250:270, mid:mid + 5] = 2.5 - 0.031  # just past the margin: hidden
     holes = (us > mid + 8) & (us < mid + 20) & (vs > 180) & (vs < 260)
     depth[holes] = 0.0
     depth[(us > mid + 30) & (vs > 200) & (vs < 210)] = 2.5 - 0.02  # within the margin: not hidden
