@@ -211,3 +211,45 @@ def test_stray_odometry_rows(tmp_path):
     np.testing.assert_allclose(a[:3, 1], [0.0, 0.0, -1.0], atol=1e-12)  # image down = world down
     np.testing.assert_allclose(b[:3, 2], [1.0, 0.0, 0.0], atol=1e-7)  # ARKit +x stays +x
     np.testing.assert_allclose(b[:3, 1], [0.0, 0.0, -1.0], atol=1e-7)
+
+
+def test_nerfstudio_fisheye_and_per_frame_cameras(tmp_path):
+    """Per-frame cameras (two sizes) and an OPENCV_FISHEYE lens: each frame loads at its own size,
+    undistorted back to the pinhole image it was made from; fusion takes each frame's camera."""
+    import cv2
+
+    from markerplace.scan.fuse import TSDFFusion
+
+    v, u = np.mgrid[0:96, 0:128]
+    pinhole = np.stack([(u * 2) % 256, (v * 2) % 256, ((u // 16 + v // 16) % 2) * 255], axis=-1).astype(np.uint8)
+    K = np.array([[70.0, 0, 63.5], [0, 70.0, 47.5], [0, 0, 1]])
+    D = np.array([0.05, -0.01, 0.002, 0.0])
+    pts = np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64).reshape(-1, 1, 2)
+    und = cv2.fisheye.undistortPoints(pts, K, D, P=K).reshape(96, 128, 2).astype(np.float32)
+    stored = cv2.remap(pinhole, und[..., 0], und[..., 1], cv2.INTER_LINEAR)
+    (tmp_path / "images").mkdir()
+    Image.fromarray(stored).save(tmp_path / "images" / "a.png")
+    Image.fromarray(np.zeros((48, 64, 3), np.uint8)).save(tmp_path / "images" / "b.png")
+    cv2.imwrite(str(tmp_path / "b_depth.png"), np.full((24, 32), 2000, np.uint16))
+    eye = np.eye(4).tolist()
+    meta = {"frames": [
+        {"file_path": "images/a.png", "transform_matrix": eye, "camera_model": "OPENCV_FISHEYE", "fl_x": 70.0, "fl_y": 70.0,
+         "cx": 64.0, "cy": 48.0, "w": 128, "h": 96, "k1": 0.05, "k2": -0.01, "k3": 0.002, "k4": 0.0},
+        {"file_path": "images/b.png", "depth_file_path": "b_depth.png", "transform_matrix": eye, "fl_x": 40.0,
+         "fl_y": 40.0, "cx": 32.0, "cy": 24.0}]}
+    (tmp_path / "transforms.json").write_text(json.dumps(meta))
+    fs = open_frameset(tmp_path, up="y")
+    a, b = fs.frames
+    assert a.distortion.model == "fisheye" and b.distortion is None
+    assert (frame_intrinsics(fs, a).width, frame_intrinsics(fs, b).width, frame_intrinsics(fs, b).cx) == (128, 64, 31.5)
+    rgb, depth = load_frame(fs, a)
+    inner = (slice(15, 81), slice(20, 108))
+    err_back = np.mean(np.abs(rgb[inner].astype(float) - pinhole[inner].astype(float)))
+    err_lens = np.mean(np.abs(stored[inner].astype(float) - pinhole[inner].astype(float)))
+    assert err_back < 0.25 * err_lens, (err_back, err_lens)  # undistorted back, where the lens moved things
+    rgb_b, depth_b = load_frame(fs, b)  # depth 32x24 -> 64x48, nearest
+    assert depth_b.shape == (48, 64) and np.all(depth_b == 2000)
+    fusion = TSDFFusion(frame_intrinsics(fs, a), FuseConfig(voxel=0.05))
+    assert fusion.integrate(rgb_b, depth_b, fs.depth_scale, np.eye(4), frame_intrinsics(fs, b))
+    V = np.asarray(fusion.extract_mesh().vertices)
+    assert len(V) > 50 and np.all(np.abs(V[:, 2] - 2.0) < 0.03)

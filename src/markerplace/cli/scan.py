@@ -54,7 +54,7 @@ def cmd_fuse(args: argparse.Namespace) -> int:
     if args.max_dt <= 0:
         raise UserError(f"--max-dt {args.max_dt:g} must be positive (seconds)")
     fs = open_frameset(args.frames, args.format, args.intrinsics, args.max_dt, up=args.up)
-    log.info("%s: %d frames (%s layout), %dx%d, depth scale %g per metre, up axis from %s", fs.root, len(fs.frames),
+    log.info("%s: %d frames (%s layout), %dx%d, depth scale %g per metre, up axis: %s", fs.root, len(fs.frames),
              fs.format, fs.intrinsics.width, fs.intrinsics.height, fs.depth_scale, fs.up_source)
     mesh = fuse_frameset(fs, config, progress=_progress(args))
     fs, mesh = refine_up(fs, mesh)

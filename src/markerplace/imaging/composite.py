@@ -7,10 +7,12 @@ image row 0 towards the marker's +y, as the renderer's quads (:mod:`markerplace.
 -- into the frame:
 
 1. **Geometry**: exact per-pixel inverse mapping. ``supersample`` x ``supersample`` rays per pixel
-   meet the marker plane (z = 0 of ``world_from_marker``: on the wall; the renderer lifts its quad
-   4 mm to avoid z-fighting, which moves a corner by < 0.1 px at 2 m) and read the tag cell there;
+   meet the marker plane (z = 0 of ``world_from_marker``, on the wall) and read the tag cell there;
    their mean is the pixel's anti-aliased coverage, so edges lie where
-   :func:`markerplace.geometry.project` puts ``marker.corners_world()``. Rays meeting the plane
+   :func:`markerplace.geometry.project` puts ``marker.corners_world()`` (the corners localization
+   assumes). The renderer lifts its quad :data:`~markerplace.render.vertices.MARKER_OFFSET` (4 mm)
+   off the wall against z-fighting, so its corners sit ``f * 4 mm * sin(viewing angle) / depth``
+   away from these: up to 0.7 px at 2 m and 40 degrees with 7-Scenes' f = 525 px. Rays meeting the plane
    behind the camera cover nothing: tags behind the camera, facing away or out of view are
    skipped with zero stats; one crossing the camera plane is drawn where it is in front.
 2. **Occlusion**: the tag's planar depth at each pixel centre (ray-plane intersection) against the
@@ -35,7 +37,6 @@ occlusion test and its exact, supersampled coverage.
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -44,13 +45,13 @@ import numpy as np
 
 from markerplace.geometry import invert
 from markerplace.imaging.degrade import GAMMA, motion_blur, sensor_noise
+from markerplace.imaging.frame_estimates import estimate_blur_sigma, estimate_noise_sigma, luma
 from markerplace.markers import Marker
 from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_cells
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CompositeConfig", "CompositeStats", "composite_tags", "composite_sheet", "estimate_blur_sigma",
-           "estimate_noise_sigma", "tag_levels"]
+__all__ = ["CompositeConfig", "CompositeStats", "composite_tags", "composite_sheet", "tag_levels"]
 
 HOLE_POLICIES = ("visible", "hidden")
 NEAR_M = 0.01
@@ -65,12 +66,6 @@ INK_OVER_PAPER = 0.055
 CAST_STRENGTH = 0.5
 """Share (in log chroma) of the surroundings' colour attributed to the light and given to the
 tag; the rest is taken as the paint's own colour."""
-BLUR_PROBE = 1.0
-"""Gaussian pre-smoothing (pixels) of the blur estimator's gradients."""
-BLUR_REBLUR = 2.0
-"""Known Gaussian (pixels) the blur estimator re-blurs with."""
-EDGE_FLOOR_DN = 3.0
-"""Weakest gradient (DN per pixel) an edge pixel of the blur estimator may have."""
 SHEET_THUMB_WIDTH = 320
 """Width (pixels) of each frame in :func:`composite_sheet`."""
 
@@ -139,87 +134,6 @@ class CompositeStats:
     noise_sigma: float = 0.0
 
 
-def _luma(rgb: np.ndarray) -> np.ndarray:
-    """Rec. 601 luminance of (..., 3) RGB values (OpenCV's RGB2GRAY weights)."""
-    return np.asarray(rgb, np.float64) @ np.array([0.299, 0.587, 0.114])
-
-
-def estimate_noise_sigma(image: np.ndarray) -> float:
-    """Standard deviation (DN) of a frame's additive noise, Immerkaer's method made robust.
-
-    Each channel is filtered with Immerkaer's kernel ``[[1, -2, 1], [-2, 4, -2], [1, -2, 1]]``
-    (the difference of two Laplacians: zero on constant and linear shading, ``6 sigma`` standard
-    deviation on white noise) and the median absolute response divided by ``0.6745 * 6`` (the
-    MAD of a Gaussian); the median (not Immerkaer's mean) ignores the edges and texture that
-    cover fewer than half of the pixels. Channels are averaged. Signal-dependent noise is
-    measured at the median signal.
-
-    Args:
-        image: (H, W, 3) or (H, W) image, any dtype of DN.
-    Returns:
-        sigma in DN (>= 0).
-    """
-    img = np.asarray(image, np.float32)
-    chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
-    kernel = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    sig = [float(np.median(np.abs(cv2.filter2D(c, -1, kernel)[1:-1, 1:-1]))) / (0.6745 * 6.0) for c in chans]
-    return float(np.mean(sig))
-
-
-def _ridge_gradients(gray: np.ndarray, sigma: float) -> np.ndarray:
-    s = cv2.GaussianBlur(gray, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
-    gy, gx = np.gradient(s)
-    return np.hypot(gx, gy)
-
-
-def _reblur_ratio(sigma_t: np.ndarray) -> np.ndarray:
-    """Central-difference gradient ratio at a step edge of total blur ``sigma_t`` before and after
-    re-blurring by :data:`BLUR_REBLUR`: ``(f(1) - f(-1)) / 2 = A erf(1 / (sqrt 2 sigma)) / 2``."""
-    g = np.vectorize(lambda s: math.erf(1.0 / (math.sqrt(2.0) * s)))
-    return g(sigma_t) / g(np.sqrt(sigma_t ** 2 + BLUR_REBLUR ** 2))
-
-
-_SIGMA_TABLE = np.linspace(BLUR_PROBE, 12.0, 400)
-_RATIO_TABLE = _reblur_ratio(_SIGMA_TABLE)  # decreasing in sigma
-
-
-def estimate_blur_sigma(image: np.ndarray) -> float:
-    """Gaussian blur (pixels) of a frame beyond pixel-area integration, by the re-blur gradient
-    ratio at its strong edges (Zhuo and Sim, "Defocus map estimation from a single image", 2011).
-
-    Gradient magnitudes (central differences) of the gray image smoothed by :data:`BLUR_PROBE`
-    (``m1``) and by ``sqrt(BLUR_PROBE**2 + BLUR_REBLUR**2)`` (``m2``) are compared at edge pixels:
-    3 x 3 maxima of ``m1`` above ``max(EDGE_FLOOR_DN, 0.35 * 99th percentile)``. For a step edge of
-    total blur ``s`` the ratio ``m1 / m2`` is :func:`_reblur_ratio` ``(s)``, independent of its
-    contrast; the median ratio is inverted to ``s`` and the blur is
-    ``sqrt(s**2 - BLUR_PROBE**2 - 1/12)`` (1/12: the variance of a pixel's box). Texture and
-    nearby edges bias it (a frame without clean edges reads sharper); tested within 30 % on
-    blurred synthetic edge images. Returns 0 when there are fewer than 20 edge pixels.
-
-    Args:
-        image: (H, W, 3) RGB or (H, W) gray, DN.
-    Returns:
-        sigma in pixels (>= 0).
-    """
-    img = np.asarray(image, np.float64)
-    gray = _luma(img) if img.ndim == 3 else img
-    m1 = _ridge_gradients(gray, BLUR_PROBE)
-    m2 = _ridge_gradients(gray, float(np.hypot(BLUR_PROBE, BLUR_REBLUR)))
-    core = np.zeros_like(m1, bool)
-    core[4:-4, 4:-4] = True  # away from the replicated border
-    peak = m1 >= cv2.dilate(m1.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.float64)
-    ridge = core & peak & (m2 > 0)
-    if ridge.sum() < 20:
-        return 0.0
-    thr = max(EDGE_FLOOR_DN, 0.35 * float(np.percentile(m1[ridge], 99)))
-    edges = ridge & (m1 >= thr)
-    if edges.sum() < 20:
-        return 0.0
-    ratio = float(np.median(m1[edges] / m2[edges]))
-    s = float(np.interp(ratio, _RATIO_TABLE[::-1], _SIGMA_TABLE[::-1]))
-    return float(np.sqrt(max(s * s - BLUR_PROBE ** 2 - 1.0 / 12.0, 0.0)))
-
-
 def tag_levels(rgb: np.ndarray, region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """White and black RGB levels (DN) of a paper tag over ``region`` of a frame.
 
@@ -235,9 +149,9 @@ def tag_levels(rgb: np.ndarray, region: np.ndarray) -> tuple[np.ndarray, np.ndar
         white (3,), black (3,) float64 DN.
     """
     px = np.asarray(rgb, np.float64)[region] if region.any() else np.asarray(rgb, np.float64).reshape(-1, 3)
-    white = float(np.clip(PAPER_OVER_WALL ** (1.0 / GAMMA) * np.median(_luma(px)), 0.0, 255.0))
+    white = float(np.clip(PAPER_OVER_WALL ** (1.0 / GAMMA) * np.median(luma(px)), 0.0, 255.0))
     mean = px.mean(axis=0)
-    cast = np.clip((mean / max(float(_luma(mean)), 1.0)) ** CAST_STRENGTH, 0.5, 2.0) if _luma(mean) > 0 else np.ones(3)
+    cast = np.clip((mean / max(float(luma(mean)), 1.0)) ** CAST_STRENGTH, 0.5, 2.0) if luma(mean) > 0 else np.ones(3)
     w = np.clip(white * cast, 0.0, 255.0)
     return w, w * INK_OVER_PAPER ** (1.0 / GAMMA)
 
@@ -315,7 +229,8 @@ def composite_tags(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, world_fr
 
     Args:
         rgb: (H, W, 3) uint8 RGB frame.
-        depth_m: (H, W) planar depth registered to ``rgb``, metres, 0 = no reading.
+        depth_m: (H, W) planar depth registered to ``rgb``, metres, 0 = no reading (NaN and inf
+            count as 0; convert a dataset's own invalid value, e.g. 7-Scenes' 65535 mm, to 0).
         K: (3, 3) camera matrix.
         world_from_cam: (4, 4) pose of the frame, OpenCV camera axes.
         markers: the tags to draw (world frame); nearer ones are drawn over farther ones.
@@ -326,6 +241,7 @@ def composite_tags(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, world_fr
     """
     rgb = np.asarray(rgb)
     depth = np.asarray(depth_m, np.float64)
+    depth = np.where(np.isfinite(depth), depth, 0.0)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ValueError(f"rgb must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
     if depth.shape != rgb.shape[:2]:
@@ -376,7 +292,7 @@ def composite_tags(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, world_fr
         n_hidden, n_hole = int((covered & hidden).sum()), int((covered & hole).sum())
         n_drawn = int((covered & ~blocked).sum())
         stats[i] = CompositeStats(int(m.tag_id), n_cov, n_hidden, n_hole, n_drawn / n_cov if n_cov else 0.0,
-                                  float(sigma_b), float(_luma(w_rgb) / 255.0), float(sigma_n))
+                                  float(sigma_b), float(luma(w_rgb) / 255.0), float(sigma_n))
         log.debug("composite: %s", stats[i])
     return out, list(stats)
 

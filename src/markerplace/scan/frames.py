@@ -141,10 +141,10 @@ def orient(fs: FrameSet, up=None) -> FrameSet:
         source = UP_SOURCE_CAMERAS
         (log.warning if spread > SPREAD_WARN_DEG else log.info)(
             "%s: up axis estimated from %d cameras' down axes: (%.3f, %.3f, %.3f), spread %.1f deg%s", fs.root,
-            len(fs.frames), *vec, spread, "; the cameras were not held level, check the result or give --up"
+            len(fs.frames), *vec, spread, "; the cameras' up axes spread widely: check the result or give --up"
             if spread > SPREAD_WARN_DEG else "")
     T = world_from_input(vec)
-    log.info("%s: up axis from %s: (%.3f, %.3f, %.3f) in the input world, turned %.1f deg to +z", fs.root, source, *vec,
+    log.info("%s: up axis (%s): (%.3f, %.3f, %.3f) in the input world, turned %.1f deg to +z", fs.root, source, *vec,
              angle_deg(vec, [0.0, 0.0, 1.0]))
     if np.array_equal(T, np.eye(4)):
         return replace(fs, up_source=source, world_from_input=T)

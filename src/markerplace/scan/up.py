@@ -4,9 +4,10 @@ Every frame set is handed out in a world whose +z is up (what ``plan`` expects o
 direction of the input's world comes, in this order, from ``--up``, the layout itself (a gravity
 file, or a world frame the layout defines), or an estimate:
 
-* :func:`estimate_up_from_cameras`: people hold cameras roughly level, so the mean of the
-  cameras' up axes (the OpenCV camera's -y axis in the world, unit vectors) is close to up; the
-  spread is the arcsine of the mean ``|u_i x up|`` (degrees), warned about over
+* :func:`estimate_up_from_cameras`: people hold cameras roughly level (little roll), so up is
+  the direction most nearly perpendicular to the cameras' x axes, else (a camera that barely
+  turned) the mean of their up axes (the OpenCV camera's -y axis in the world); the spread is
+  the arcsine of the mean ``|u_i x up|`` over the up axes (degrees), warned about over
   :data:`SPREAD_WARN_DEG`;
 * :func:`estimate_up_from_mesh`: the dominant normal of the horizontal surfaces (floors, table
   tops) within :data:`MESH_SEARCH_DEG` of a prior up, used by ``fuse`` to refine the camera
@@ -98,24 +99,50 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def estimate_up_from_cameras(world_from_cams: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
-    """Up from the cameras' up axes (-y of each OpenCV camera, in the world).
+    """Up from how the cameras were held (OpenCV axes: x right, y down).
+
+    People hold cameras with little roll but look up and down at will, and often mostly one way
+    (a kitchen counter): the cameras' x axes are then close to horizontal whatever the pitch,
+    while the mean of their up axes (-y) leans towards where they looked (25 deg on 7-Scenes'
+    redkitchen, whose cameras look down 25 deg on average). So the estimate is the direction
+    most nearly perpendicular to every x axis (the eigenvector of the smallest eigenvalue of
+    ``mean(x_i x_i^T)``), signed like the mean up axis; when the x axes are too close to one
+    direction for that to be determined (second eigenvalue under :data:`_X_SPAN_MIN`: the
+    camera barely turned), or it is over 60 deg from the mean up axis, the normalised mean of the
+    up axes is used instead.
 
     Returns:
-        (unit up (3,), spread in degrees: arcsine of the mean ``|u_i x up|``).
+        (unit up (3,), spread in degrees: arcsine of the mean ``|u_i x up|`` over the cameras'
+        up axes ``u_i``, the measure warned about over :data:`SPREAD_WARN_DEG`).
 
     Raises:
         UserError: no cameras, or up axes that cancel out (cameras held every way).
     """
-    ups = np.array([-np.asarray(T, dtype=np.float64)[:3, 1] for T in world_from_cams]).reshape(-1, 3)
-    if len(ups) == 0:
+    Rs = np.array([np.asarray(T, dtype=np.float64)[:3, :3] for T in world_from_cams]).reshape(-1, 3, 3)
+    if len(Rs) == 0:
         raise UserError("cannot estimate the up axis without cameras")
+    ups = -Rs[:, :, 1]
     mean = ups.mean(axis=0)
     n = float(np.linalg.norm(mean))
     if n < 0.1:
         raise UserError("cannot estimate the up axis: the cameras are held every way (give --up, e.g. --up z)")
     up = mean / n
+    xs = Rs[:, :, 0]
+    w, v = np.linalg.eigh(xs.T @ xs / len(xs))
+    perp = v[:, 0] * (1.0 if float(v[:, 0] @ up) >= 0 else -1.0)
+    how = "mean of the up axes"
+    if w[1] >= _X_SPAN_MIN and angle_deg(perp, up) <= 60.0:
+        how = f"perpendicular to the x axes, {angle_deg(perp, up):.1f} deg from the mean up axis"
+        up = perp
     spread = math.degrees(math.asin(min(1.0, float(np.mean(np.linalg.norm(np.cross(ups, up), axis=1))))))
+    roll = math.degrees(math.asin(min(1.0, float(np.mean(np.abs(xs @ up))))))
+    log.info("camera up estimate (%s): mean |roll| %.1f deg, up-axis spread %.1f deg", how, roll, spread)
     return up, spread
+
+
+_X_SPAN_MIN = 0.02
+"""Second-smallest eigenvalue of ``mean(x_i x_i^T)`` needed to trust the x-axis estimate
+(about 16 deg of heading spread: the x axes must span a plane)."""
 
 
 def estimate_up_from_mesh(vertices: np.ndarray, normals: np.ndarray, prior: Sequence[float] = (0.0, 0.0, 1.0),
