@@ -25,6 +25,8 @@ from markerplace.scene import load_scene
 
 INTR = Intrinsics(160, 120, 100.0, 100.0, 79.5, 59.5)
 LOW = Intrinsics(64, 48, 40.0, 40.0, 31.5, 23.5)  # INTR scaled by 0.4, pixel centres aligned
+COLOUR7 = Intrinsics(160, 120, 131.25, 131.25, 79.625, 59.625)
+"""7-Scenes' colour camera (fx 525, principal point (320, 240) at 640x480) scaled to 160x120."""
 VOXEL = 0.04
 Z = np.array([0.0, 0.0, 1.0])
 
@@ -76,11 +78,16 @@ def rendered():
         for T in poses:
             d = r.render(T, rgb=False, normal=False).depth
             low.append(np.where(np.isfinite(d), d, 0.0))
-    return scene, frames, low
+    colour7 = []  # 7-Scenes: the colour camera is not the depth camera (INTR); both images of it
+    with Renderer(scene, COLOUR7) as r:
+        for T in poses:
+            res = r.render(T, normal=False)
+            colour7.append((res.rgb, np.where(np.isfinite(res.depth), res.depth, 0.0), T))
+    return scene, frames, low, colour7
 
 
 def _write(fmt: str, root, rendered):
-    _, frames, low = rendered
+    _, frames, low, colour7 = rendered
     A = TILTS[fmt]
     tilted = [(rgb, d, A @ T) for rgb, d, T in frames]
     if fmt == "markerplace":
@@ -91,7 +98,9 @@ def _write(fmt: str, root, rendered):
         write_tum(root, tilted)
         (root / "cam.json").write_text(json.dumps({"width": 160, "height": 120, "fx": 100, "fy": 100, "cx": 79.5, "cy": 59.5}))
     elif fmt == "7scenes":
-        write_7scenes(root, tilted, INTR, gravity_down=A[:3, :3] @ -Z)
+        # colour from the colour camera, depth from the depth camera (camera-intrinsics.txt)
+        tilted7 = [(c[0], d, A @ T) for c, (_, d, T) in zip(colour7, frames)]
+        write_7scenes(root, tilted7, INTR, gravity_down=A[:3, :3] @ -Z)
     elif fmt == "nerfstudio":
         write_nerfstudio(root, tilted, INTR, depth_size=(80, 60), opencv_coeffs=(-0.08, 0.02, 0.001, -0.0005, 0.0))
     else:
@@ -104,7 +113,7 @@ def _write(fmt: str, root, rendered):
 
 @pytest.mark.parametrize("fmt", sorted(TILTS))
 def test_layout_round_trip_poses_up_axis_and_fused_surface(fmt, rendered, tmp_path):
-    scene, frames, _ = rendered
+    scene, frames, _, colour7 = rendered
     root = tmp_path / fmt
     A = _write(fmt, root, rendered)
     assert detect_format(root) == fmt
@@ -127,10 +136,12 @@ def test_layout_round_trip_poses_up_axis_and_fused_surface(fmt, rendered, tmp_pa
     # images: pinhole, colour size, depth in metres where the scene is
     rgb, d16 = load_frame(fs, fs.frames[8])
     assert rgb.shape == (120, 160, 3) and d16.shape == (120, 160) and frame_intrinsics(fs, fs.frames[8]).width == 160
-    ok = (d16 > 0) & (frames[8][1] > 0)
-    assert ok.mean() > 0.8
-    assert np.median(np.abs(d16[ok] / fs.depth_scale - frames[8][1][ok])) < 0.01
-    assert np.median(np.abs(rgb.astype(float) - frames[8][0].astype(float))) < 12  # undistorted back (nerfstudio), video (stray)
+    truth = colour7[8] if fmt == "7scenes" else frames[8]  # 7-Scenes: depth registered to the colour camera
+    assert frame_intrinsics(fs, fs.frames[8]) == (COLOUR7 if fmt == "7scenes" else INTR)
+    ok = (d16 > 0) & (truth[1] > 0)
+    assert ok.mean() > (0.7 if fmt == "7scenes" else 0.8)  # 7-Scenes: the colour camera sees wider than the depth
+    assert np.median(np.abs(d16[ok] / fs.depth_scale - truth[1][ok])) < 0.01
+    assert np.median(np.abs(rgb.astype(float) - truth[0].astype(float))) < 12  # undistorted back (nerfstudio), video (stray)
     # fused surface on the room's surface, floor level after the up rotation (and refinement)
     mesh = fuse_frameset(fs, FuseConfig(voxel=VOXEL), progress=False)
     fs2, mesh2 = refine_up(fs, mesh)
@@ -165,7 +176,8 @@ def test_7scenes_pose_file_as_given(tmp_path):
     (tmp_path / "gravity-direction.txt").write_text("0.0\n1.0\n0.0\n")
     fs = open_frameset(tmp_path)
     T = fs.frames[0].world_from_cam
-    assert fs.format == "7scenes" and (fs.intrinsics.fx, fs.intrinsics.cx, fs.intrinsics.width) == (585.0, 320.0, 640)
+    assert fs.format == "7scenes" and (fs.intrinsics.fx, fs.intrinsics.cx, fs.intrinsics.width) == (525.0, 320.0, 640)
+    assert (fs.depth_intrinsics.fx, fs.depth_intrinsics.cx) == (585.0, 320.0)  # the dataset's depth camera
     np.testing.assert_allclose(T[:3, 3], [0.1, 0.3, 1.2], atol=1e-12)  # 1.2 m above the origin
     np.testing.assert_allclose(T[:3, 2], [0.0, 1.0, 0.0], atol=1e-12)  # looks level, along the old +z
     np.testing.assert_allclose(T[:3, 1], [0.0, 0.0, -1.0], atol=1e-12)  # image down = world down

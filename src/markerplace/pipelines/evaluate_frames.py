@@ -30,12 +30,14 @@ from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import marker_key
 from markerplace.localization.features import SIFT_DEFAULT
 from markerplace.pipelines.plan_frames import prepare_frames
+from markerplace.plan.frames.surface import FUSED_NAME
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, write_page
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
 from markerplace.runtime.cache import hash_of
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
+from markerplace.scene.worldframe import world_offset
 from markerplace.runtime.cache import config_dict
 from markerplace.testbed import metrics
 from markerplace.testbed.config import validate_evaluate_config
@@ -68,6 +70,12 @@ class FramesResult:
     out: Path
     rows: list
     markdown: str
+
+
+def _shifted(world_from_cam: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    out = np.array(world_from_cam, float)
+    out[:3, 3] -= offset
+    return out
 
 
 def _surface_key(path: Path) -> tuple:
@@ -112,8 +120,11 @@ def run_frames_evaluation(fs, plan_config, config, frames_config: FramesEvalConf
     data = prepare_frames(fs, map_idx, plan_config, out / "plan", mesh=mesh, progress=progress, k=max(ks))
     placements = build_placements(data, plan_config.placement, config)
     log.info("evaluating %d marker sets: %s", len(placements), ", ".join(sorted({p.method for p in placements})))
-    surface_path = Path(mesh) if mesh is not None else out / "plan" / "fused.ply"
-    surface = SceneSpec(str(surface_path), up="z", unit_scale=1.0)
+    surface_path = Path(mesh) if mesh is not None else out / "plan" / FUSED_NAME
+    surface = SceneSpec(str(surface_path), up="z" if mesh is None else None, unit_scale=1.0 if mesh is None else None)
+    # the plan (markers) and the renders are in the surface's internal frame: so are the poses here
+    offset = world_offset(surface.load())
+    fs = replace(fs, frames=tuple(replace(r, world_from_cam=_shifted(r.world_from_cam, offset)) for r in fs.frames))
     imaging = ImagingConfig(camera=fs.intrinsics, sift=SIFT_DEFAULT, max_depth=plan_config.imaging.max_depth)
     spec = FrameJobSpec(fs, surface, imaging, frames_config.composite, config.seed)
     poses = np.array([r.world_from_cam for r in fs.frames])

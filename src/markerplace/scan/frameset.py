@@ -102,6 +102,11 @@ class FrameSet:
             ``"layout (z up)"``, ``"estimated from the cameras' down axes"``, ...).
         world_from_input: (4, 4) rotation applied to the input's world to make +z up:
             ``frames[i].world_from_cam = world_from_input @ (pose as written)``.
+        depth_intrinsics: pinhole model of the depth images as stored when their camera is not
+            the colour camera (7-Scenes), or None: the depth is registered to the colour (or a
+            scaled copy of it). :func:`~markerplace.scan.frames.load_frame` resamples such depth
+            into the colour camera (zero-baseline model: colour pixel ``x`` reads the depth pixel
+            ``K_depth K_colour^-1 x``; the poses are the depth camera's).
     """
 
     root: Path
@@ -111,6 +116,7 @@ class FrameSet:
     frames: tuple[FrameRecord, ...]
     up_source: str = "input world as written"
     world_from_input: np.ndarray = field(default_factory=lambda: np.eye(4))
+    depth_intrinsics: Intrinsics | None = None
 
 
 CONFIDENCE_MIN = 1

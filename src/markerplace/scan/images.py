@@ -10,8 +10,9 @@ and returns
 * depth (H, W) uint16 in ``fs.depth_scale`` units per metre, 0 = no reading: 7-Scenes' 65535
   read as 0, readings below :data:`~markerplace.scan.frameset.CONFIDENCE_MIN` confidence
   dropped, a smaller depth image of the same aspect ratio (Stray, nerfstudio) upsampled to the
-  colour size by nearest neighbour with pixel centres aligned, and undistorted like the colour
-  (nearest neighbour). A frame without depth (nerfstudio) gives all zeros.
+  colour size by nearest neighbour with pixel centres aligned, depth of another camera (7-Scenes:
+  ``FrameSet.depth_intrinsics``) resampled into the colour camera (:func:`register_depth`), and
+  undistorted like the colour (nearest neighbour). A frame without depth (nerfstudio) gives all zeros.
 
 Every problem raises :class:`~markerplace.errors.UserError` with one line naming the frame and file.
 """
@@ -141,6 +142,8 @@ def _read_depth(fs: FrameSet, rec: FrameRecord, W: int, H: int) -> np.ndarray:
             raise UserError(f"frame {rec.name}: confidence image {rec.confidence_path} is {got}; it must be a single-channel "
                             f"PNG of the depth image's size {depth.shape[1]}x{depth.shape[0]}")
         depth[conf < CONFIDENCE_MIN] = 0
+    if fs.depth_intrinsics is not None:
+        return register_depth(depth, fs.depth_intrinsics, frame_intrinsics(fs, rec), rec)
     if depth.shape != (H, W):
         h, w = depth.shape
         if fs.format in RESAMPLED_DEPTH_FORMATS and abs(w * H - h * W) <= 0.01 * w * H and w <= W:
@@ -148,6 +151,25 @@ def _read_depth(fs: FrameSet, rec: FrameRecord, W: int, H: int) -> np.ndarray:
         else:
             raise UserError(f"frame {rec.name}: depth image {rec.depth_path} is {w}x{h}, the intrinsics say {W}x{H}")
     return depth
+
+
+def register_depth(depth: np.ndarray, depth_intr: Intrinsics, colour_intr: Intrinsics, rec: FrameRecord) -> np.ndarray:
+    """Depth of another pinhole camera at the same pose resampled into the colour camera
+    (nearest neighbour): colour pixel ``(u, v)`` takes the depth pixel ``K_depth K_colour^-1
+    (u, v, 1)``, 0 where that falls outside the depth image. Planar depth is unchanged (same
+    optical axis). (H_d, W_d) uint16 -> (H, W) uint16 of ``colour_intr``."""
+    h, w = depth.shape
+    if (w, h) != (depth_intr.width, depth_intr.height):
+        raise UserError(f"frame {rec.name}: depth image {rec.depth_path} is {w}x{h}, the intrinsics say "
+                        f"{depth_intr.width}x{depth_intr.height} (the depth camera)")
+    u = np.arange(colour_intr.width, dtype=np.float64)
+    v = np.arange(colour_intr.height, dtype=np.float64)
+    ud = np.rint(depth_intr.cx + (u - colour_intr.cx) * depth_intr.fx / colour_intr.fx).astype(np.int64)
+    vd = np.rint(depth_intr.cy + (v - colour_intr.cy) * depth_intr.fy / colour_intr.fy).astype(np.int64)
+    out = np.zeros((colour_intr.height, colour_intr.width), np.uint16)
+    cols, rows = (ud >= 0) & (ud < w), (vd >= 0) & (vd < h)
+    out[np.ix_(rows, cols)] = depth[np.ix_(vd[rows], ud[cols])]
+    return out
 
 
 def load_frame(fs: FrameSet, rec: FrameRecord) -> tuple[np.ndarray, np.ndarray]:
@@ -182,4 +204,5 @@ def load_frame(fs: FrameSet, rec: FrameRecord) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(rgb), np.ascontiguousarray(depth)
 
 
-__all__ = ["RESAMPLED_DEPTH_FORMATS", "INVALID_DEPTH", "read_video_frame", "undistort_maps", "nearest_resize", "load_frame"]
+__all__ = ["RESAMPLED_DEPTH_FORMATS", "INVALID_DEPTH", "read_video_frame", "undistort_maps", "nearest_resize", "register_depth",
+           "load_frame"]

@@ -18,7 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.imaging.engine import marker_key
-from markerplace.imaging.features import FeatureSet
+from markerplace.imaging.features import FeatureSet, ImageFeatures
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
@@ -30,6 +30,11 @@ from markerplace.testbed.maps import localize_task, save_map
 log = logging.getLogger(__name__)
 
 __all__ = ["markers_in_view_of", "train_codebook", "build_map", "localize_queries"]
+
+
+def _without_extras(feats: ImageFeatures) -> ImageFeatures:
+    """The features a map keeps (per-image compositing counts differ in length between images)."""
+    return ImageFeatures(feats.keypoints, feats.descriptors, feats.points_world, feats.tag_ids, feats.tag_corners)
 
 
 def markers_in_view_of(in_view: dict, frame: int, markers: Sequence[Marker]) -> list[Marker]:
@@ -60,7 +65,7 @@ def build_map(store: FeatureStore, kind: str, map_frames: Sequence[int], poses: 
                    [marker_key(m) for m in markers], np.asarray(codebook.centres))
     folder = Path(root) / f"{kind}-{name}"
     if not (folder / "markers.json").is_file():
-        feats = FeatureSet.from_images([store.get(k).with_3d_only() for k in keys])
+        feats = FeatureSet.from_images([_without_extras(store.get(k).with_3d_only()) for k in keys])
         save_map(folder, feats, np.asarray(poses, float), list(markers), np.asarray(codebook.centres))
     return folder
 
