@@ -6,7 +6,11 @@ from __future__ import annotations
 import argparse
 import logging
 
+from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
+from markerplace.pipelines.plan_frames import FramesInputs, check_frames_method, run_plan_frames
+from markerplace.plan.frames.poses import frame_indices
+from markerplace.scan.frames import open_frameset
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -34,11 +38,6 @@ def add_frames_args(p: argparse.ArgumentParser) -> None:
 def cmd_plan_frames(args: argparse.Namespace) -> int:
     """``plan --frames DIR``: refuses a scene with it (or neither), the options that need a
     scene, then plans and prints what it wrote."""
-    from markerplace.cli.options import plan_config_from_args
-    from markerplace.pipelines.plan_frames import FramesInputs, check_frames_method, run_plan_frames
-    from markerplace.plan.frames.poses import frame_indices
-    from markerplace.scan.frames import open_frameset
-
     if args.frames is None:
         raise UserError("plan needs a scene (a built-in name or a mesh file) or --frames DIR")
     if args.scene is not None:
