@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ from markerplace.cli.main import main
 from markerplace.imaging.visibility import marker_points, markers_unoccluded
 from markerplace.pipelines.plan_frames import prepare_frames
 from markerplace.plan.config import PlanConfig
+from markerplace.plan.place.stage import place
 from markerplace.render.renderer import Renderer
 from markerplace.scan.frames import open_frameset
 from markerplace.scan.simulate import distance_to_scene
@@ -83,6 +86,24 @@ def test_second_prepare_reuses_every_stage(prepared):
     assert set(again.timings) >= {"fuse", "discretize", "observe"}
     assert np.array_equal(again.disc.candidate_position, data.disc.candidate_position)
     assert np.allclose(again.base_score, data.base_score)
+
+
+@pytest.mark.parametrize("method", ["omp", "random", "uniform", "human"])
+def test_every_method_but_the_calibrated_one_places_tags(prepared, method):
+    _, _, data = prepared
+    config = replace(PlanConfig().placement, method=method, k=3)
+    placement = place(data, config, progress=False)
+    assert len(set(placement.candidates.tolist())) == 3
+
+
+def test_a_given_mesh_replaces_the_fused_surface(prepared, tmp_path):
+    fs, run, data = prepared
+    shutil.copy(run / "fused.ply", tmp_path / "mesh.ply")
+    other = prepare_frames(fs, np.arange(len(fs.frames)), PlanConfig(), tmp_path / "run", mesh=tmp_path / "mesh.ply",
+                           progress=False)
+    assert not (tmp_path / "run" / "fused.ply").exists()
+    assert np.allclose(other.disc.candidate_position, data.disc.candidate_position)
+    assert other.disc.summary["frames"]["surface"] == str(tmp_path / "mesh.ply")
 
 
 def test_plan_from_frames_end_to_end(tiny_frames, tiny, tmp_path):
