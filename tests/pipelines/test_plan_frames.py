@@ -124,6 +124,8 @@ def test_plan_from_frames_end_to_end(tiny_frames, tiny, tmp_path):
     assert main(["plan", "--frames", str(tiny_frames), "--config", str(tmp_path / "config.json"), "--out", str(out),
                  "--paper", "none", "--quiet"]) == 0
     assert json.loads((out / "placement.json").read_text())["markers"] == doc["markers"]
+    # the commands that rebuild a run from a scene say they cannot (one line)
+    assert main(["export", str(out), "--gltf", str(tmp_path / "x.glb")]) == 2
 
 
 @pytest.mark.parametrize("args, message", [
