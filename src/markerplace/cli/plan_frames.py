@@ -46,6 +46,10 @@ def cmd_plan_frames(args: argparse.Namespace) -> int:
     for flag, value in (("--existing", args.existing), ("--where", args.where), ("--with-map", args.with_map)):
         if value:
             raise UserError(f"{flag} is not supported with --frames yet")
+    ignored = [f for f, v in (("--up", args.up), ("--unit-scale", args.unit_scale)) if v is not None]
+    if ignored:
+        log.warning("%s: for a scene argument; ignored with --frames (the frames and --mesh are read in the frames' "
+                    "world frame)", " and ".join(ignored))
     if args.frame_step is not None and args.frame_step < 1:
         raise UserError(f"--frame-step {args.frame_step} must be a positive integer")
     config = plan_config_from_args(args)
