@@ -329,7 +329,18 @@ _COMMON_RUN_OPTIONS = {
 }
 
 RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
-    "plan": {**_SCENE_RUN_OPTIONS, "--out": None, "--where": None,
+    "plan": {**_SCENE_RUN_OPTIONS,
+             "scene": ("required unless `--frames`", "a built-in scene name (`markerplace scene list`) or a mesh "
+                                                    "file (.glb, .gltf, .obj, .ply); left out with `--frames`"),
+             "--frames": ("none", "plan at the camera poses of this RGB-D sequence, from its own images (markerplace "
+                                  "or TUM layout, [docs/rgbd_layout.md](rgbd_layout.md)), tags on the surface fused "
+                                  "from the frames; give no scene (see [Planning from RGB-D frames]"
+                                  "(#planning-from-rgb-d-frames-plan---frames))"),
+             "--format": None, "--intrinsics": None,
+             "--mesh": ("none", "with `--frames`: put tags on this mesh (the frames' world frame, z up, metres) "
+                                "instead of the surface fused from the frames"),
+             "--frame-step": ("at most 400 poses", "with `--frames`: every N-th frame is a camera pose"),
+             "--out": None, "--where": None,
              "--config": ("none", "settings from a TOML file or a plan's `config.json` (see "
                                   "[Settings files](#settings-files-plan---config)); options given on the command "
                                   "line override it"),

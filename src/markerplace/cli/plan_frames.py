@@ -6,7 +6,11 @@ from __future__ import annotations
 import argparse
 import logging
 
+from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
+from markerplace.pipelines.plan_frames import FramesInputs, check_frames_method, run_plan_frames
+from markerplace.plan.frames.poses import frame_indices
+from markerplace.scan.frames import open_frameset
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -34,11 +38,6 @@ def add_frames_args(p: argparse.ArgumentParser) -> None:
 def cmd_plan_frames(args: argparse.Namespace) -> int:
     """``plan --frames DIR``: refuses a scene with it (or neither), the options that need a
     scene, then plans and prints what it wrote."""
-    from markerplace.cli.options import plan_config_from_args
-    from markerplace.pipelines.plan_frames import FramesInputs, check_frames_method, run_plan_frames
-    from markerplace.plan.frames.poses import frame_indices
-    from markerplace.scan.frames import open_frameset
-
     if args.frames is None:
         raise UserError("plan needs a scene (a built-in name or a mesh file) or --frames DIR")
     if args.scene is not None:
@@ -47,6 +46,10 @@ def cmd_plan_frames(args: argparse.Namespace) -> int:
     for flag, value in (("--existing", args.existing), ("--where", args.where), ("--with-map", args.with_map)):
         if value:
             raise UserError(f"{flag} is not supported with --frames yet")
+    ignored = [f for f, v in (("--up", args.up), ("--unit-scale", args.unit_scale)) if v is not None]
+    if ignored:
+        log.warning("%s: for a scene argument; ignored with --frames (the frames and --mesh are read in the frames' "
+                    "world frame)", " and ".join(ignored))
     if args.frame_step is not None and args.frame_step < 1:
         raise UserError(f"--frame-step {args.frame_step} must be a positive integer")
     config = plan_config_from_args(args)

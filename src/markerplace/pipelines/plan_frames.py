@@ -37,6 +37,7 @@ from markerplace.plan.config import PlanConfig, validate
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization
 from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion
+from markerplace.plan.folder import FRAMES_SCENE_PREFIX
 from markerplace.plan.frames.candidates import frame_candidates
 from markerplace.plan.frames.layout import floor_height, frames_discretization
 from markerplace.plan.frames.observe import run_frame_observe
@@ -211,7 +212,7 @@ def run_plan_frames(config: PlanConfig, inputs: FramesInputs, out: str | Path) -
     predicted = {"predicted_recall": predicted_recall(data, placement, config.placement),
                  "score_bound": score_bound(data, placement)}
     data.timings["predicted recall and bounds"] = time.perf_counter() - t0
-    source = f"frames:{fs.root}"
+    source = f"{FRAMES_SCENE_PREFIX}{fs.root}"
     summary = write_plan_outputs(out, data=data, placement=placement, first_gain=first_pick_gain(data, placement),
                                  config=config, method=config.placement.method, scene_source=source, scene=scene,
                                  world_offset=offset, paper=inputs.paper,

@@ -25,7 +25,10 @@ from markerplace.scene.worldframe import markers_to_internal, points_to_internal
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanFolder", "read_plan_folder", "config_from_dict"]
+__all__ = ["FRAMES_SCENE_PREFIX", "PlanFolder", "read_plan_folder", "config_from_dict"]
+
+FRAMES_SCENE_PREFIX = "frames:"
+"""``config.json``'s ``scene`` of a plan made from RGB-D frames (``plan --frames``) starts so."""
 
 
 def _tuples(v):
@@ -142,6 +145,9 @@ def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
     if "scene" not in config_json or not isinstance(placement.get("markers"), list):
         raise UserError(f"{path} was not written by `markerplace plan` (config.json has no scene or placement.json "
                         f"no markers): {rerun}")
+    if str(config_json["scene"]).startswith(FRAMES_SCENE_PREFIX):
+        raise UserError(f"{option} {str(path)!r} was planned from RGB-D frames (plan --frames); export, check and "
+                        "evaluate --plan read plans made on a scene only (for now)")
     try:
         config = config_from_dict(PlanConfig, upgrade_legacy(config_json))  # older folders: flat discretize
         markers = [marker_from_json(r) for r in placement["markers"]]
