@@ -370,6 +370,22 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                                     "(evaluated as its method's, `--k` up to its k, default its k); its cached stages "
                                     "(discretization, observations, look-alikes, calibration) are reused, the folder "
                                     "is only read; an option that differs from the plan's is refused"),
+                 "--frames": ("none", "evaluate on a real RGB-D sequence (any layout of [docs/rgbd_layout.md]"
+                                      "(rgbd_layout.md)) instead of a scene: plan at the map frames' poses, "
+                                      "composite each placement's tags into the real photographs, localize the "
+                                      "query frames (see [Real photographs](#real-photographs-evaluate---frames))"),
+                 "--format": ("auto", "with `--frames`: the layout of the frame folder"),
+                 "--intrinsics": ("none", "with `--frames`: the camera of a TUM sequence"),
+                 "--mesh": ("none", "with `--frames`: a mesh (the frames' world, z up, metres) for the tag spots and "
+                                    "the renders instead of the surface fused from the map frames"),
+                 "--map": ("frames,render", "with `--frames`: the map images: the real map frames (`frames`), the "
+                                            "fused surface rendered at their poses (`render`) or both"),
+                 "--no-gap": ("off", "with `--frames`: skip the queries rendered from the fused surface (the gap "
+                                     "table)"),
+                 "--block": ("50", "with `--frames`: frames per block of the map / query split"),
+                 "--gap-frames": ("10", "with `--frames`: frames left out at each end of a query block"),
+                 "--map-step": ("2", "with `--frames`: every n-th frame of a map block is a map image"),
+                 "--query-step": ("2", "with `--frames`: every n-th frame of a query block is a query"),
                  **_COMMON_RUN_OPTIONS},
     "study": {**_SCENE_RUN_OPTIONS,
               "--seed": ("0", "seeds the scene generator of built-ins and every evaluation of the study (as "

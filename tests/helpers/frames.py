@@ -34,15 +34,16 @@ def tiny_poses(n: int = 40) -> np.ndarray:
     return np.array(out)
 
 
-def write_tiny_frames(root: str | Path, n: int = 40, seed: int = 0) -> Path:
-    """Write the sequence into ``root`` (markerplace layout) and return it."""
+def write_tiny_frames(root: str | Path, n: int = 40, seed: int = 0, size: tuple[int, int] = (320, 240)) -> Path:
+    """Write the sequence into ``root`` (markerplace layout) at ``size`` (width, height; the
+    focal length scales with the width, 262.5 at 320) and return it."""
     from markerplace.scan.frames import FrameWriter
     from markerplace.scan.simulate import FrameSimulator, ScanConfig
     from markerplace.scan.walk import seeded_rng
     from markerplace.scene import load_scene
 
     root = Path(root)
-    cfg = ScanConfig()
+    cfg = ScanConfig(width=size[0], height=size[1], fx=262.5 * size[0] / 320, fy=262.5 * size[0] / 320)
     rng = seeded_rng(seed, 7)
     with FrameSimulator(load_scene("tiny"), cfg) as sim, FrameWriter(root, cfg.intrinsics) as writer:
         for j, T in enumerate(tiny_poses(n)):

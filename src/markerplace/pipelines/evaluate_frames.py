@@ -204,7 +204,8 @@ FRAMES_UNSUPPORTED_REASON = "its success model is fitted on renders at the plan'
 def _write_report(out: Path, fs, spec: FrameJobSpec, placements, query_idx, in_view: dict, md: str, count: int) -> None:
     """report.html: the tables and a sheet of query frames with the largest placement's tags
     composited in, so a person can judge the compositing."""
-    shown = max((p for p in placements if p.markers), key=lambda p: (p.method == "omp", p.k), default=None)
+    ranked = sorted((p for p in placements if p.markers), key=lambda p: (p.method != "omp", -p.k, p.method, p.run))
+    shown = next((p for p in ranked if any(markers_in_view_of(in_view, f, p.markers) for f in query_idx)), None)
     figures = []
     if shown is not None and count > 0:
         worker = FrameWorker(spec)

@@ -11,9 +11,9 @@ import pytest
 from helpers.frames import tiny_poses
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.plan.frames.poses import (MAX_POSES, default_frame_step, frame_indices, frame_intrinsics,
+from markerplace.plan.frames.poses import (MAX_POSES, default_frame_step, frame_indices,
                                            plan_intrinsics, pose_fields)
-from markerplace.scan.frameset import FrameRecord, FrameSet
+from markerplace.scan.frameset import FrameRecord, FrameSet, frame_intrinsics
 
 
 def _frameset(n: int = 5) -> FrameSet:

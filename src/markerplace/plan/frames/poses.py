@@ -1,7 +1,5 @@
 """The camera poses a frames plan serves: the chosen frames' own 6-DoF poses.
 
-* :func:`frame_intrinsics`: the one place that reads a frame's camera model (a per-frame
-  ``intrinsics`` field when the frame set has one, else the set's);
 * :func:`plan_intrinsics`: the one camera model of the chosen frames (scoring uses one K;
   frames with another model are refused);
 * :func:`default_frame_step` / :func:`frame_indices`: the CLI's subsampling (``--frame-step``);
@@ -19,16 +17,12 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
+from markerplace.scan.frameset import frame_intrinsics
 
-__all__ = ["MAX_POSES", "frame_intrinsics", "plan_intrinsics", "default_frame_step", "frame_indices", "pose_fields"]
+__all__ = ["MAX_POSES", "plan_intrinsics", "default_frame_step", "frame_indices", "pose_fields"]
 
 MAX_POSES = 400
 """Without ``--frame-step``, every n-th frame so that at most this many poses are served."""
-
-
-def frame_intrinsics(fs, rec) -> Intrinsics:
-    """The camera model of frame ``rec`` of frame set ``fs`` (its own when the layout gives one)."""
-    return getattr(rec, "intrinsics", None) or fs.intrinsics
 
 
 def plan_intrinsics(fs, indices: np.ndarray) -> Intrinsics:

@@ -31,13 +31,13 @@ class FrameSplitConfig:
         block: frames per block (default 50: about 1.7 s of 30 Hz video).
         gap: frames dropped at each end of a query block (default 10).
         map_step: every n-th frame of a map block is a map image (default 2).
-        query_step: every n-th frame of a query block is a query (default 3).
+        query_step: every n-th frame of a query block is a query (default 2).
     """
 
     block: int = 50
     gap: int = 10
     map_step: int = 2
-    query_step: int = 3
+    query_step: int = 2
 
     def validate(self) -> None:
         """Raise :class:`UserError` for settings that leave no frame or let the sets touch."""
