@@ -18,8 +18,8 @@ image row 0 towards the marker's +y, as the renderer's quads (:mod:`markerplace.
 2. **Occlusion**: the tag's planar depth at each pixel centre (ray-plane intersection) against the
    frame's: a pixel is hidden where the reading is > 0 and nearer than the tag by more than
    ``occlusion_margin_m``. Depth holes (0) follow ``hole_policy`` (see :class:`CompositeConfig`).
-3. **Appearance** (:func:`tag_levels`): white and black levels and a colour cast from the frame
-   around the tag's footprint.
+3. **Appearance** (:func:`tag_levels`): white and black levels from the light on the surface
+   around the tag's footprint, and the light's colour from the whole frame.
 4. **Blur**: the coverage is blurred by the frame's Gaussian blur (:func:`estimate_blur_sigma`)
    with :func:`markerplace.imaging.degrade.motion_blur`'s defocus; hidden pixels are masked after
    blurring, so they keep the frame's colour exactly.
@@ -64,8 +64,8 @@ INK_OVER_PAPER = 0.055
 """Linear-light ratio of black toner (about 4-5 % reflectance) to white paper: black reads
 ``0.055 ** (1 / GAMMA)``, about 0.27 times the white DN (lens flare keeps it from 0 too)."""
 CAST_STRENGTH = 0.5
-"""Share (in log chroma) of the surroundings' colour attributed to the light and given to the
-tag; the rest is taken as the paint's own colour."""
+"""Share (in log chroma) of the frame's mean colour attributed to the light and given to the tag;
+the rest is taken as the colours of what the frame shows."""
 SHEET_THUMB_WIDTH = 320
 """Width (pixels) of each frame in :func:`composite_sheet`."""
 
@@ -134,24 +134,30 @@ class CompositeStats:
     noise_sigma: float = 0.0
 
 
-def tag_levels(rgb: np.ndarray, region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def tag_levels(rgb: np.ndarray, region: np.ndarray, frame: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """White and black RGB levels (DN) of a paper tag over ``region`` of a frame.
 
-    White luminance = ``clip(PAPER_OVER_WALL ** (1/GAMMA) * median luminance of region, 0, 255)``
-    (white paper on that surface under that light); black = ``INK_OVER_PAPER ** (1/GAMMA)`` times
-    white. Both are tinted by the region's mean colour over its luminance, raised to
-    :data:`CAST_STRENGTH` (clipped to 0.5..2 per channel).
+    White = ``clip(PAPER_OVER_WALL ** (1/GAMMA) * median over region of max(R, G, B), 0, 255)``:
+    the brightest channel of a surface follows the light falling on it whatever the paint's hue
+    (a red cabinet's red channel, a white wall's every channel), so white paper under that light
+    reads about 1.24 times it; black = ``INK_OVER_PAPER ** (1/GAMMA)`` times white. Both are
+    tinted by the light's colour, estimated grey-world from the whole ``frame`` (its mean colour
+    over its luminance, raised to :data:`CAST_STRENGTH`, clipped to 0.5..2 per channel), not from
+    the surface under the tag (whose colour is its paint's).
 
     Args:
-        rgb: (H, W, 3) uint8 frame.
+        rgb: (H, W, 3) uint8 pixels around the tag.
         region: (H, W) bool, pixels around the tag's footprint (all pixels when empty).
+        frame: (H', W', 3) uint8 whole frame for the light's colour (None: ``rgb``).
     Returns:
         white (3,), black (3,) float64 DN.
     """
     px = np.asarray(rgb, np.float64)[region] if region.any() else np.asarray(rgb, np.float64).reshape(-1, 3)
-    white = float(np.clip(PAPER_OVER_WALL ** (1.0 / GAMMA) * np.median(luma(px)), 0.0, 255.0))
-    mean = px.mean(axis=0)
+    white = float(np.clip(PAPER_OVER_WALL ** (1.0 / GAMMA) * np.median(px.max(axis=1)), 0.0, 255.0))
+    whole = np.asarray(rgb if frame is None else frame, np.float64).reshape(-1, 3)
+    mean = whole.mean(axis=0)
     cast = np.clip((mean / max(float(luma(mean)), 1.0)) ** CAST_STRENGTH, 0.5, 2.0) if luma(mean) > 0 else np.ones(3)
+    cast = cast / cast.max()  # the tint lowers channels, never pushes the brightest past the light's level
     w = np.clip(white * cast, 0.0, 255.0)
     return w, w * INK_OVER_PAPER ** (1.0 / GAMMA)
 
@@ -275,7 +281,7 @@ def composite_tags(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, world_fr
         if config.match_brightness:
             grow = max(3, int(0.25 * np.sqrt(max(n_cov, 1))))
             near = cv2.dilate((cov > 0).astype(np.uint8), np.ones((2 * grow + 1,) * 2, np.uint8)).astype(bool)
-            w_rgb, b_rgb = tag_levels(rgb[y0:y1, x0:x1], near & ~hidden)
+            w_rgb, b_rgb = tag_levels(rgb[y0:y1, x0:x1], near & ~hidden, rgb)
         else:
             w_rgb, b_rgb = np.full(3, 255.0), np.zeros(3)
         if sigma_b > 0.05:
