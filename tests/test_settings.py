@@ -12,7 +12,8 @@ import pytest
 from markerplace.cli.main import build_parser, main
 from markerplace.cli.options import plan_config_from_args
 from markerplace.plan.config import PlanConfig
-from markerplace.settings import NO_FLAG, NO_FLAG_SECTIONS, RUN_OPTIONS, flagged, walk
+from markerplace.cli.run_options import RUN_OPTIONS
+from markerplace.settings import NO_FLAG, NO_FLAG_SECTIONS, flagged, walk
 from markerplace.pipelines.study import StudyPlan
 from markerplace.testbed.config import EvaluateConfig
 
@@ -40,7 +41,7 @@ def test_every_flag_has_a_field_and_every_field_a_flag(command):
     assert not field_flags - flags, f"config fields whose flag is missing from {command}: {field_flags - flags}"
     orphans = flags - field_flags - set(RUN_OPTIONS[command])
     assert not orphans, (f"{command} options that are neither a config field's (markerplace.settings.setting) nor a "
-                         f"run option (markerplace.settings.RUN_OPTIONS): {sorted(orphans)}")
+                         f"run option (markerplace.cli.run_options.RUN_OPTIONS): {sorted(orphans)}")
     assert not set(RUN_OPTIONS[command]) & field_flags, "a run option that is a config field's too"
     without = []
     for prefix, config in _configs(command).items():

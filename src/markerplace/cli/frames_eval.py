@@ -64,7 +64,7 @@ def cmd_evaluate_frames(args: argparse.Namespace, plan_config, config, progress:
     if args.scene is not None or args.plan is not None:
         raise UserError("--frames evaluates a frame sequence: give no scene and no --plan with it")
     frames_config = frames_eval_config_from_args(args)
-    fs = open_frameset(args.frames, args.frames_format, args.frames_intrinsics)
+    fs = open_frameset(args.frames, args.frames_format, args.frames_intrinsics, up=args.up)
     run_folder.open_run_folder(args.out, "evaluate", adopt=args.adopt)
     result = run_frames_evaluation(fs, plan_config, config, frames_config, args.out, mesh=args.mesh, progress=progress)
     print(result.markdown.split("## Every threshold")[0].strip())

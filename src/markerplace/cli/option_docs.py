@@ -4,7 +4,7 @@ Each table sits between ``<!-- options:COMMAND -->`` and ``<!-- /options:COMMAND
 docs/cli.md; ``scripts/cli_docs.py`` rewrites them (:func:`rewrite`), and
 ``tests/test_settings.py`` fails when the file is out of date. An option of a config field takes
 its default and text from the field (:mod:`markerplace.settings`); a run option
-(:data:`~markerplace.settings.RUN_OPTIONS`) its docs text from there or its ``--help``.
+(:data:`~markerplace.cli.run_options.RUN_OPTIONS`) its docs text from there or its ``--help``.
 ``evaluate``'s and ``study``'s tables list only the options ``plan`` does not have.
 """
 
@@ -15,7 +15,8 @@ import re
 from markerplace.cli.main import build_parser
 from markerplace.pipelines.study import StudyPlan
 from markerplace.plan.config import PlanConfig
-from markerplace.settings import RUN_OPTIONS, flagged, shown_default
+from markerplace.cli.run_options import RUN_OPTIONS
+from markerplace.settings import flagged, shown_default
 from markerplace.testbed.config import EvaluateConfig
 
 __all__ = ["option_table", "rewrite", "COMMANDS"]

@@ -10,7 +10,7 @@ from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
 from markerplace.pipelines.plan_frames import FramesInputs, check_frames_method, run_plan_frames
 from markerplace.plan.frames.poses import frame_indices
-from markerplace.scan.frames import open_frameset
+from markerplace.scan.frames import FORMATS, open_frameset
 
 log = logging.getLogger("markerplace.cli.main")
 
@@ -21,11 +21,10 @@ def add_frames_args(p: argparse.ArgumentParser) -> None:
     """``--frames``, ``--format``, ``--intrinsics``, ``--mesh``, ``--frame-step``."""
     g = p.add_argument_group("planning from RGB-D frames (plan --frames DIR, no scene)")
     g.add_argument("--frames", default=None, metavar="DIR",
-                   help="plan at the camera poses of this RGB-D sequence, from its own images (markerplace or TUM "
-                        "layout, docs/rgbd_layout.md); tags go on the surface fused from the frames; give no scene")
-    g.add_argument("--format", default="auto", choices=["auto", "markerplace", "tum"],
-                   help="layout of --frames (default auto: markerplace if poses.txt/intrinsics.json exist, tum if "
-                        "rgb.txt/depth.txt do)")
+                   help="plan at the camera poses of this RGB-D sequence, from its own images (markerplace, TUM, "
+                        "7-Scenes, nerfstudio or Stray Scanner layout, docs/rgbd_layout.md); tags go on the surface fused from the frames; give no scene")
+    g.add_argument("--format", default="auto", choices=["auto", *FORMATS],
+                   help="layout of --frames (default auto: detected from the folder's files, docs/rgbd_layout.md)")
     g.add_argument("--intrinsics", default=None, metavar="FILE.json",
                    help="TUM layout: camera intrinsics JSON (width, height, fx, fy, cx, cy, optional depth_scale)")
     g.add_argument("--mesh", default=None, metavar="FILE",
@@ -46,15 +45,14 @@ def cmd_plan_frames(args: argparse.Namespace) -> int:
     for flag, value in (("--existing", args.existing), ("--where", args.where), ("--with-map", args.with_map)):
         if value:
             raise UserError(f"{flag} is not supported with --frames yet")
-    ignored = [f for f, v in (("--up", args.up), ("--unit-scale", args.unit_scale)) if v is not None]
-    if ignored:
-        log.warning("%s: for a scene argument; ignored with --frames (the frames and --mesh are read in the frames' "
-                    "world frame)", " and ".join(ignored))
+    if args.unit_scale is not None:
+        log.warning("--unit-scale: for a scene argument; ignored with --frames (the frames and --mesh are read in "
+                    "the frames' world frame, metres)")
     if args.frame_step is not None and args.frame_step < 1:
         raise UserError(f"--frame-step {args.frame_step} must be a positive integer")
     config = plan_config_from_args(args)
     check_frames_method(config)  # before reading any frame
-    fs = open_frameset(args.frames, args.format, args.intrinsics)
+    fs = open_frameset(args.frames, args.format, args.intrinsics, up=args.up)
     idx = frame_indices(len(fs.frames), args.frame_step)
     log.info("plan --frames: %d of %d frames (%s layout, every %d) as camera poses", len(idx), len(fs.frames),
              fs.format, int(idx[1] - idx[0]) if len(idx) > 1 else 1)

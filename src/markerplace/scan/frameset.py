@@ -129,6 +129,44 @@ def frame_intrinsics(fs: FrameSet, rec: FrameRecord) -> Intrinsics:
     return rec.intrinsics if rec.intrinsics is not None else fs.intrinsics
 
 
+def image_size(path: Path, hint: str = "") -> tuple[int, int]:
+    """(width, height) of an image file; :class:`UserError` naming it when it is missing or
+    unreadable (``hint``: what the layout expects there, appended to the not-found message)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as img:
+            return img.size
+    except FileNotFoundError:
+        raise UserError(f"colour image {path} not found{f' ({hint})' if hint else ''}") from None
+    except Exception as err:  # PIL raises many kinds on corrupt files
+        raise UserError(f"cannot read colour image {path} ({err.__class__.__name__})") from None
+
+
+def rotation_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    """(3, 3) rotation of a unit quaternion (Hamilton convention, scalar last as in TUM files)."""
+    x, y, z, w = qx, qy, qz, qw
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def pose_from_quaternion(t, q_xyzw, where: str) -> np.ndarray:
+    """(4, 4) pose of a translation (3,) and a unit quaternion (x, y, z, w), scalar last (TUM,
+    Stray); :class:`UserError` naming ``where`` when a value is not finite or the norm is off
+    by more than 1 %."""
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    norm = float(np.linalg.norm(q))
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))) or abs(norm - 1.0) > 0.01:
+        raise UserError(f"{where}: the pose is not rigid (quaternion norm {norm:.4g}, must be 1)")
+    T = np.eye(4)
+    T[:3, :3] = rotation_from_quaternion(*(q / norm))
+    T[:3, 3] = t
+    return T
+
+
 def check_rigid(T: np.ndarray, where: str) -> np.ndarray:
     """Validate a (4, 4) ``world_from_cam`` and return it with an exactly orthonormal rotation.
 
@@ -213,5 +251,5 @@ def intrinsics_dict(intrinsics: Intrinsics, depth_scale: float) -> dict:
             "depth_scale": float(depth_scale)}
 
 
-__all__ = ["Distortion", "FrameRecord", "FrameSet", "CONFIDENCE_MIN", "frame_intrinsics", "ROTATION_TOLERANCE", "FRAME_NAME_RE", "check_rigid", "parse_numbers", "data_lines",
+__all__ = ["image_size", "rotation_from_quaternion", "pose_from_quaternion", "Distortion", "FrameRecord", "FrameSet", "CONFIDENCE_MIN", "frame_intrinsics", "ROTATION_TOLERANCE", "FRAME_NAME_RE", "check_rigid", "parse_numbers", "data_lines",
            "read_intrinsics", "intrinsics_dict"]

@@ -49,7 +49,7 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
 from markerplace.jsonfile import read_json
-from markerplace.scan.frameset import Distortion, FrameRecord, FrameSet, check_rigid
+from markerplace.scan.frameset import Distortion, FrameRecord, FrameSet, check_rigid, image_size
 
 log = logging.getLogger(__name__)
 
@@ -81,18 +81,6 @@ def _matrix(value, where: str, key: str) -> np.ndarray:
     return M
 
 
-def _image_size(path: Path) -> tuple[int, int]:
-    from PIL import Image
-
-    try:
-        with Image.open(path) as img:
-            return img.size
-    except FileNotFoundError:
-        raise UserError(f"colour image {path} not found") from None
-    except Exception as err:
-        raise UserError(f"cannot read colour image {path} ({err.__class__.__name__})") from None
-
-
 def _camera(meta: dict, frame: dict, where: str, image: Path) -> tuple[Intrinsics, Distortion | None]:
     """Pinhole intrinsics (OpenCV pixel centres) and distortion of one frame: its keys over the shared ones."""
     def get(key):
@@ -108,7 +96,7 @@ def _camera(meta: dict, frame: dict, where: str, image: Path) -> tuple[Intrinsic
     if fx <= 0 or fy <= 0:
         raise UserError(f"{where}: fl_x and fl_y must be positive")
     if get("w") is None or get("h") is None:
-        w, h = _image_size(image)
+        w, h = image_size(image)
     else:
         w, h = (_number(get(k), where, k) for k in ("w", "h"))
         if w != int(w) or h != int(h) or w <= 0 or h <= 0:

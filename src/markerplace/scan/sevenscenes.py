@@ -38,7 +38,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.scan.frameset import FrameRecord, FrameSet, check_rigid, data_lines, parse_numbers
+from markerplace.scan.frameset import FrameRecord, FrameSet, check_rigid, data_lines, image_size, parse_numbers
 
 log = logging.getLogger(__name__)
 
@@ -98,16 +98,6 @@ def read_gravity(root: Path) -> np.ndarray | None:
     return -g / np.linalg.norm(g)
 
 
-def _image_size(path: Path) -> tuple[int, int] | None:
-    from PIL import Image
-
-    try:
-        with Image.open(path) as img:
-            return img.size
-    except Exception:  # unreadable: load_frame names the problem
-        return None
-
-
 def read_7scenes(root: Path) -> FrameSet:
     """Read a 7-Scenes sequence folder (module docstring); poses in the sequence's world."""
     root = Path(root)
@@ -120,7 +110,10 @@ def read_7scenes(root: Path) -> FrameSet:
         if not color.exists() and (root / f"{name}.color.jpg").exists():
             color = root / f"{name}.color.jpg"
         frames.append(FrameRecord(name, color, root / f"{name}.depth.png", read_pose_file(root / f"{name}.pose.txt")))
-    size = _image_size(frames[0].depth_path) or (SEVENSCENES_INTRINSICS.width, SEVENSCENES_INTRINSICS.height)
+    try:
+        size = image_size(frames[0].depth_path)
+    except UserError:  # unreadable: load_frame names the problem when the frame is read
+        size = (SEVENSCENES_INTRINSICS.width, SEVENSCENES_INTRINSICS.height)
     kfile = root / "camera-intrinsics.txt"
     if kfile.exists():
         depth_intrinsics = read_camera_intrinsics(kfile, *size)

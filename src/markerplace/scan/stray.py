@@ -40,8 +40,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.scan.frameset import FrameRecord, FrameSet, data_lines, parse_numbers
-from markerplace.scan.tum import rotation_from_quaternion
+from markerplace.scan.frameset import FrameRecord, FrameSet, data_lines, image_size, parse_numbers, pose_from_quaternion
 
 log = logging.getLogger(__name__)
 
@@ -92,13 +91,7 @@ def read_odometry(path: Path) -> list[tuple[int, np.ndarray]]:
         if frame in seen:
             raise UserError(f"{where}: frame {frame} is listed twice")
         seen.add(frame)
-        q = np.array(v[3:7])
-        norm = float(np.linalg.norm(q))
-        if not np.all(np.isfinite(v)) or abs(norm - 1.0) > 0.01:
-            raise UserError(f"{where}: the pose is not rigid (quaternion norm {norm:.4g}, must be 1)")
-        T = np.eye(4)
-        T[:3, :3] = rotation_from_quaternion(*(q / norm))
-        T[:3, 3] = v[0:3]
+        T = pose_from_quaternion(v[0:3], v[3:7], where)
         out.append((frame, T))
     return out
 
@@ -106,7 +99,6 @@ def read_odometry(path: Path) -> list[tuple[int, np.ndarray]]:
 def _colour_size(root: Path, first: Path | None) -> tuple[int, int]:
     """(width, height) of the colour video or the first colour image."""
     import cv2
-    from PIL import Image
 
     video = root / "rgb.mp4"
     if first is None:
@@ -120,13 +112,7 @@ def _colour_size(root: Path, first: Path | None) -> tuple[int, int]:
         if w <= 0 or h <= 0:
             raise UserError(f"cannot decode {video}: OpenCV reports no frame size")
         return w, h
-    try:
-        with Image.open(first) as img:
-            return img.size
-    except FileNotFoundError:
-        raise UserError(f"{first} not found (Stray layout: one colour image per odometry row)") from None
-    except Exception as err:
-        raise UserError(f"cannot read colour image {first} ({err.__class__.__name__})") from None
+    return image_size(first, "Stray layout: one colour image per odometry row")
 
 
 def read_stray(root: Path) -> FrameSet:

@@ -23,7 +23,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.scan.frameset import FrameRecord, FrameSet, data_lines, parse_numbers, read_intrinsics
+from markerplace.scan.frameset import FrameRecord, FrameSet, data_lines, parse_numbers, pose_from_quaternion, read_intrinsics
 
 log = logging.getLogger(__name__)
 
@@ -33,16 +33,6 @@ TUM_FR1_INTRINSICS = Intrinsics(640, 480, 517.3, 516.5, 318.6, 255.3)
 """TUM freiburg1 colour camera (the benchmark's published calibration)."""
 TUM_MAX_DT = 0.02
 """Maximum timestamp difference (s) of associated colour, depth and pose (TUM associate.py)."""
-
-
-def rotation_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
-    """(3, 3) rotation of a unit quaternion (Hamilton convention, scalar last as in TUM files)."""
-    x, y, z, w = qx, qy, qz, qw
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def _read_stamped_files(path: Path) -> tuple[np.ndarray, list[str], list[Path]]:
@@ -125,13 +115,7 @@ def read_tum(root: Path, intrinsics_path: str | Path | None = None, max_dt: floa
         if len(fields) != 8:
             raise UserError(f"{where}: expected 'timestamp tx ty tz qx qy qz qw' (8 values), got {len(fields)}")
         v = parse_numbers(fields, where)
-        q = np.array(v[4:8])
-        norm = float(np.linalg.norm(q))
-        if not np.all(np.isfinite(v)) or abs(norm - 1.0) > 0.01:
-            raise UserError(f"{where}: the pose is not rigid (quaternion norm {norm:.4g}, must be 1)")
-        T = np.eye(4)
-        T[:3, :3] = rotation_from_quaternion(*(q / norm))
-        T[:3, 3] = v[1:4]
+        T = pose_from_quaternion(v[1:4], v[4:8], where)
         gt_t.append(v[0])
         gt_T.append(T)
     pairs = associate(rgb_t, dep_t, max_dt)
@@ -145,5 +129,5 @@ def read_tum(root: Path, intrinsics_path: str | Path | None = None, max_dt: floa
     return FrameSet(root, "tum", intrinsics, scale, tuple(frames))
 
 
-__all__ = ["TUM_DEPTH_SCALE", "TUM_FR1_INTRINSICS", "TUM_MAX_DT", "rotation_from_quaternion", "associate", "nearest",
+__all__ = ["TUM_DEPTH_SCALE", "TUM_FR1_INTRINSICS", "TUM_MAX_DT", "associate", "nearest",
            "read_tum"]
