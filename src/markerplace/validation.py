@@ -42,6 +42,13 @@ VOXEL = Bound("--voxel", 0.001, 1.0, "m", "a TSDF voxel edge in metres, e.g. 0.0
 DEPTH_MAX = Bound("--depth-max", 0.1, 100.0, "m", "a depth cut-off in metres, e.g. 4")
 EVERY = Bound("--every", 1, 1_000_000, "", "a frame step N (every N-th frame is fused), e.g. 1", integer=True)
 MAX_DT = Bound("--max-dt", 1e-6, 10.0, "s", "a time difference in seconds, e.g. 0.02")
+FRAME_STEP = Bound("--frame-step", 1, 1_000_000, "", "a frame step N (every N-th frame is a camera pose), e.g. 4",
+                   integer=True)
+SPLIT_BLOCK = Bound("--block", 2, 1_000_000, "", "frames per block of the map / query split, e.g. 50", integer=True)
+SPLIT_GAP = Bound("--gap-frames", 1, 1_000_000, "", "frames left out at each end of a query block, e.g. 10",
+                  integer=True)
+SPLIT_MAP_STEP = Bound("--map-step", 1, 1_000_000, "", "a frame step of the map blocks, e.g. 2", integer=True)
+SPLIT_QUERY_STEP = Bound("--query-step", 1, 1_000_000, "", "a frame step of the query blocks, e.g. 2", integer=True)
 CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", integer=True)
 MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
 

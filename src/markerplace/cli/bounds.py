@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from markerplace.errors import UserError
 from markerplace.pipelines.study import StudyPlan
-from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, HFOV, IMAGE_HEIGHT, IMAGE_WIDTH,
-                                    MATCH_RADIUS, MAX_DT, SEED, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats,
-                                    parse_int_list)
+from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
+                                    IMAGE_WIDTH, MATCH_RADIUS, MAX_DT, SEED, SPLIT_BLOCK, SPLIT_GAP, SPLIT_MAP_STEP,
+                                    SPLIT_QUERY_STEP, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats, parse_int_list)
 from markerplace.plan.config import PlanConfig
 from markerplace.runtime.cluster import parse_cluster
 from markerplace.settings import bounds_by_dest, walk
@@ -65,8 +65,9 @@ def _bounds() -> dict[str, dict[str, Bound]]:
             "scene export": {"seed": SEED, "voxel": VOXEL},
             "fuse": {"voxel": VOXEL, "depth_max": DEPTH_MAX, "every": EVERY, "max_dt": MAX_DT},
             "render": {**_SCENE_OPTIONS, "width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "hfov": HFOV},
-            "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan")},
-            "evaluate": {**plan, **evaluate},
+            "plan": {**_SCENE_OPTIONS, **bounds_by_dest(configs["plan"], "plan"), "frame_step": FRAME_STEP},
+            "evaluate": {**plan, **evaluate, "block": SPLIT_BLOCK, "gap_frames": SPLIT_GAP, "map_step": SPLIT_MAP_STEP,
+                         "query_step": SPLIT_QUERY_STEP},
             "study": {**plan, **bounds_by_dest(configs["evaluate"], "study"), **bounds_by_dest(StudyPlan(), "study")},
             "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
         })
