@@ -140,3 +140,31 @@ def test_bad_input_is_one_line(args, message, tiny_frames, tmp_path, capsys):
     assert main(["plan", *args, "-k", "3", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_a_7scenes_copy_of_the_frames_plans_the_same_spots(prepared, tiny, tmp_path):
+    """The same frames written in the 7-Scenes layout (the format's own conventions, in a world
+    tilted by 100 degrees with its gravity file; tests/helpers/frame_layouts.py) give candidate
+    spots on the same true walls: the layout's reader, up axis and depth registration feed the
+    plan as the project's own layout does."""
+    from helpers.frame_layouts import write_7scenes
+    from markerplace.geometry import invert
+    from markerplace.scan.frames import load_frame
+
+    fs, _, data = prepared
+    c, s_ = np.cos(np.radians(100.0)), np.sin(np.radians(100.0))
+    A = np.eye(4)
+    A[1:3, 1:3] = [[c, -s_], [s_, c]]
+    frames = []
+    for rec in fs.frames:
+        rgb, d16 = load_frame(fs, rec)
+        frames.append((rgb, d16 / fs.depth_scale, A @ rec.world_from_cam))
+    write_7scenes(tmp_path / "seq", frames, fs.intrinsics, gravity_down=A[:3, :3] @ np.array([0.0, 0.0, -1.0]))
+    fs7 = open_frameset(tmp_path / "seq")
+    assert fs7.format == "7scenes" and fs7.up_source == "gravity-direction.txt"
+    data7 = prepare_frames(fs7, np.arange(len(fs7.frames)), PlanConfig(), tmp_path / "run", progress=False)
+    scene_from_world7 = fs.frames[0].world_from_cam @ invert(fs7.frames[0].world_from_cam)
+    np.testing.assert_allclose(scene_from_world7[2, :3], [0, 0, 1], atol=1e-6)  # z up in both worlds
+    pos = (scene_from_world7[:3, :3] @ data7.disc.candidate_position.T).T + scene_from_world7[:3, 3]
+    assert abs(len(pos) - data.num_candidates) <= max(2, data.num_candidates // 4)
+    assert np.max(distance_to_scene(pos, tiny)) < 0.03
