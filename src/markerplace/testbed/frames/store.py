@@ -33,6 +33,8 @@ ImageKey = tuple
 """``(kind, frame index, markers)``: markers a tuple of :class:`~markerplace.markers.Marker`
 sorted by :func:`~markerplace.imaging.engine.marker_key` (only those in the frame's view)."""
 
+MEMORY_IMAGES = 2000
+"""Images whose features :meth:`FeatureStore.get` keeps in memory (oldest dropped first)."""
 _FIELDS = ("keypoints", "descriptors", "points_world", "tag_ids", "tag_corners")
 
 
@@ -71,14 +73,17 @@ class FeatureStore:
                 arrays = {name: z[name] for name in z.files}
             feats = ImageFeatures(*(arrays.pop(f) for f in _FIELDS),
                                   extras={k[len("extra_"):]: v for k, v in arrays.items() if k.startswith("extra_")})
+            if len(self._memory) >= MEMORY_IMAGES:  # bounded: a long run touches tens of thousands of images
+                self._memory.pop(next(iter(self._memory)))
             self._memory[path.name] = feats
         return feats
 
     def compute(self, keys: Sequence[ImageKey], executor, job, desc: str, progress: bool = True) -> None:
         """Compute every key not on disk yet, on ``executor`` with ``job`` (:func:`.images.frame_job`)."""
-        todo = list(dict.fromkeys(k for k in keys if not self.has(k)))
-        if len(todo) < len(set(keys)):
-            log.info("%s: %d of %d images already computed", desc, len(set(keys)) - len(todo), len(set(keys)))
+        unique = {self._path(k).name: k for k in keys}  # markers compare by identity: dedupe by content
+        todo = [k for name, k in unique.items() if not (self.folder / name).is_file()]
+        if len(todo) < len(unique):
+            log.info("%s: %d of %d images already computed", desc, len(unique) - len(todo), len(unique))
         if not todo:
             return
         with progress_bar(len(todo), desc, "image", progress) as bar:
