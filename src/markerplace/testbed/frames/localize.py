@@ -22,7 +22,7 @@ from markerplace.imaging.features import FeatureSet, ImageFeatures
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
-from markerplace.runtime.atomic_io import write_npz
+from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.runtime.cache import hash_of
 from markerplace.testbed.frames.store import FeatureStore, image_key
 from markerplace.testbed.maps import localize_task, save_map
@@ -53,7 +53,8 @@ def train_codebook(store: FeatureStore, kind: str, map_frames: Sequence[int], nu
     desc = [store.get(image_key(kind, f, ())).with_3d_only().descriptors for f in map_frames]
     codebook = VladCodebook.train(np.concatenate(desc).astype(np.float32), num_clusters=num_clusters, seed=seed)
     codebook.save(path)
-    meta.write_text(key)
+    with atomic_path(meta) as tmp:  # a run folder's own file (runtime.run_folder)
+        tmp.write_text(key)
     return codebook
 
 

@@ -21,6 +21,7 @@ from markerplace.imaging.engine import marker_key
 from markerplace.imaging.features import ImageFeatures
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
+from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime.cache import hash_of
 from markerplace.testbed.frames.images import image_task
@@ -53,7 +54,7 @@ class FeatureStore:
 
     def __init__(self, folder: str | Path, settings_key: str):
         self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        run_folder.make_dirs(self.folder)
         self.settings_key = settings_key
         self._memory: dict[str, ImageFeatures] = {}
 
