@@ -8,7 +8,6 @@ over to :func:`cmd_evaluate_frames` when ``--frames`` is given.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 from markerplace.errors import UserError
 from markerplace.pipelines.evaluate_frames import run_frames_evaluation
