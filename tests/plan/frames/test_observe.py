@@ -32,6 +32,20 @@ def test_keypoints_without_depth_are_dropped_and_points_lie_on_the_wall():
     assert f.extras["candidate_unoccluded"].shape == (0,)
 
 
+def test_a_real_cameras_off_centre_principal_point_lifts_the_right_pixel():
+    """TUM's freiburg1 camera (cx 318.6, cy 255.3 at 640x480): the depth pixel under a keypoint is
+    the keypoint's own pixel, not one scaled by 2 cx / width (the renders' assumption)."""
+    intr = Intrinsics(640, 480, 517.3, 516.5, 318.6, 255.3)
+    rgb = np.kron(_wall_image(), np.ones((2, 2, 1), np.uint8))
+    depth = np.zeros((480, 640), np.float32)
+    depth[:240] = 2.0  # top half at 2 m, bottom half no reading
+    f = frame_features(rgb, depth, np.eye(4), np.zeros((0, 5, 3)), ImagingConfig(camera=intr))
+    assert len(f.keypoints) > 10
+    assert np.all(f.keypoints[:, 1] <= 239.5)  # lifted only where its own pixel has depth (2 cy / 480 = 1.06)
+    back = f.points_world[:, 1] / f.points_world[:, 2] * intr.fy + intr.cy  # reprojects onto itself
+    assert np.allclose(back, f.keypoints[:, 1], atol=0.01)
+
+
 def test_a_tag_is_hidden_only_by_depth_nearer_than_it():
     cfg = ImagingConfig(camera=INTR)
     # a level camera at the origin looking along world +x at the wall x = 2 (world z up)

@@ -39,7 +39,8 @@ def frame_features(rgb: np.ndarray, depth_m: np.ndarray, world_from_cam: np.ndar
     candidates sampled by ``samples`` (C, 5, 3) (module docstring); ``depth_m`` planar, metres."""
     K = config.camera.K
     kp, desc = extract_sift(rgb, config.sift)
-    pts, valid = lift_to_3d(kp, depth_m, K, world_from_cam, max_depth=config.max_depth)
+    pts, valid = lift_to_3d(kp, depth_m, K, world_from_cam, max_depth=config.max_depth,
+                            image_size=(rgb.shape[1], rgb.shape[0]))  # a real principal point is off-centre
     unocc = markers_unoccluded(depth_m, world_from_cam, K, samples, config.occlusion_tolerance) if len(samples) \
         else np.zeros(0, bool)
     return ImageFeatures(kp[valid].astype(np.float32), np.clip(np.rint(desc[valid]), 0, 255).astype(np.uint8),
