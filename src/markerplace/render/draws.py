@@ -16,6 +16,13 @@ The queries of a round are read back at once (llvmpipe rasterizes what it has bi
 result is read, so one read per round, not one per query). Hand-written because GL offers the
 queries, not the policy, and moderngl has no scene graph.
 
+The boxes are drawn into a framebuffer of their own that holds only the depth buffer being
+drawn (:func:`query_framebuffer`), so no colour can be written whatever the colour masks say:
+moderngl (5.13) does not apply ``Framebuffer.color_mask`` to a bound framebuffer with a single
+colour attachment, so masking the RGB-only framebuffer let the boxes' undefined colour into the
+image (coloured blocks in every RGB-only view of a scan, while the views with more outputs were
+right).
+
 Frames: world z up, metres; ``cam_from_world`` 4x4 world -> OpenCV camera.
 """
 
@@ -30,7 +37,8 @@ from markerplace.render.culling import MIN_TRIANGLES, ChunkedTriangles, chunk_tr
 from markerplace.render.vertices import indexed_part_vertices, part_vertices
 from markerplace.scene.types import MeshPart
 
-__all__ = ["BOX_MARGIN", "NEAR_SAFE", "ROUNDS", "Draw", "OcclusionTest", "by_distance", "scene_buffers"]
+__all__ = ["BOX_MARGIN", "NEAR_SAFE", "ROUNDS", "Draw", "OcclusionTest", "by_distance", "query_framebuffer",
+           "scene_buffers"]
 
 BOX_MARGIN = 0.01
 """Metres added on every side of a chunk's box for its occlusion query (far more than the
@@ -140,20 +148,24 @@ class OcclusionTest:
         self.vao = ctx.vertex_array(self.prog, [(ctx.buffer(verts.tobytes()), "3f", "in_pos")])
         self.queries: list = []
 
-    def passed(self, fbo, cam_from_world: np.ndarray, ids: np.ndarray) -> np.ndarray:
-        """(len(ids),) bool: some sample of chunk ``ids[i]``'s box passes the depth test of
-        ``fbo`` (the framebuffer being drawn), nothing written."""
+    def passed(self, query_fbo, cam_from_world: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """(len(ids),) bool: some sample of chunk ``ids[i]``'s box passes the depth test against
+        the depth drawn so far, nothing written. ``query_fbo`` is the :func:`query_framebuffer`
+        of the depth buffer being drawn; it is left bound (the caller binds its own again)."""
         while len(self.queries) < len(ids):
             self.queries.append(self.ctx.query(samples=True))
         self.prog["cam_from_world"].write(np.asarray(cam_from_world, "f4").T.tobytes())
-        colour_mask, depth_mask = fbo.color_mask, fbo.depth_mask
-        off = (False, False, False, False)
-        fbo.color_mask = off if len(fbo.color_attachments) == 1 else (off,) * len(fbo.color_attachments)
-        fbo.depth_mask = False
-        try:
-            for query, c in zip(self.queries, ids):
-                with query:
-                    self.vao.render(vertices=36, first=36 * int(c))
-        finally:
-            fbo.color_mask, fbo.depth_mask = colour_mask, depth_mask
+        query_fbo.use()
+        for query, c in zip(self.queries, ids):
+            with query:
+                self.vao.render(vertices=36, first=36 * int(c))
         return np.array([q.samples > 0 for q in self.queries[:len(ids)]], dtype=bool)
+
+
+def query_framebuffer(ctx, depth_attachment):
+    """A framebuffer for occlusion queries: ``depth_attachment`` (the depth buffer being drawn)
+    and no colour attachment, depth writes off (applied when it is bound). Nothing drawn into it
+    changes an image (see the module docstring)."""
+    fbo = ctx.framebuffer(depth_attachment=depth_attachment)
+    fbo.depth_mask = False
+    return fbo

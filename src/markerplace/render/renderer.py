@@ -15,7 +15,8 @@ has one) is instead sorted into spatial chunks and each view draws only the chun
 frustum (:mod:`markerplace.render.culling`) and are not hidden behind nearer ones (occlusion
 queries, :mod:`markerplace.render.draws`), through an index buffer when its parts have
 per-vertex normals; the images are those of the whole buffer (``Renderer(cull=False)``; tested
-pixel for pixel), except where two surfaces tie in depth at a pixel centre. Markers are
+pixel for pixel), except where two surfaces tie in depth at a pixel centre. Every combination of
+outputs gives the same RGB image (tested pixel for pixel on a scene of several chunked atlases). Markers are
 extra textured quads (tag image with white quiet zone, nearest-neighbour magnification) lifted
 :data:`~markerplace.render.vertices.MARKER_OFFSET` metres off the wall along their normal;
 :meth:`Renderer.set_markers` replaces them without touching the scene buffers.
@@ -46,7 +47,7 @@ from markerplace.geometry import Intrinsics, invert
 from markerplace.markers import Marker
 from markerplace.scene.types import MeshPart, Scene
 from markerplace.render.culling import chunk_ranges, frustum_planes, visible_chunks
-from markerplace.render.draws import Draw, OcclusionTest, by_distance, scene_buffers
+from markerplace.render.draws import Draw, OcclusionTest, by_distance, query_framebuffer, scene_buffers
 from markerplace.render.gl_resources import FAR, NEAR, build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
 from markerplace.render.vertices import marker_vertices, part_vertices
 
@@ -200,6 +201,7 @@ class Renderer:
             self._glass_draws.append((Draw(texture_of(key), ctx.buffer(data.tobytes()), len(data)), centroid))
         self._glass_fbo = ctx.framebuffer(color_attachments=[self._tex_rgb], depth_attachment=self._zbuf)
         self._glass_fbo.depth_mask = False
+        self._query_fbo = query_framebuffer(ctx, self._zbuf)
         self._tag_textures: dict[int, object] = {}
         self._marker_draws: list = []
         ctx.enable(moderngl.DEPTH_TEST)
@@ -343,7 +345,8 @@ class Renderer:
         rounds = by_distance(draw.chunks, visible_chunks(draw.chunks, cam_from_world, self._frustum), eye)
         for i, ids in enumerate(rounds):
             if i and len(ids):
-                ids = ids[draw.occlusion.passed(fbo, cam_from_world, ids)]
+                ids = ids[draw.occlusion.passed(self._query_fbo, cam_from_world, ids)]
+                fbo.use()
             for first, count in chunk_ranges(draw.chunks, ids):
                 vao.render(vertices=count, first=first)
 
