@@ -7,11 +7,17 @@ setup:
 demo: setup
 	bash scripts/demo.sh
 
+# Tests run in a fresh temporary folder named as pytest's first run on a machine names its own
+# (pytest-of-USER/pytest-0): what a fresh clone on a new machine sees, whatever ran here before.
+TEST_TMP = .pytest-tmp
+
 test: setup
-	.venv/bin/python -m pytest -q
+	rm -rf $(TEST_TMP) && mkdir -p $(TEST_TMP)  # pytest makes the basetemp, not its parent
+	.venv/bin/python -m pytest -q --basetemp $(TEST_TMP)/pytest-0
 
 test-slow: setup
-	.venv/bin/python -m pytest -q -m slow || [ $$? -eq 5 ]  # exit 5: no slow tests collected
+	rm -rf $(TEST_TMP) && mkdir -p $(TEST_TMP)  # pytest makes the basetemp, not its parent
+	.venv/bin/python -m pytest -q -m slow --basetemp $(TEST_TMP)/pytest-0 || [ $$? -eq 5 ]  # exit 5: no slow tests collected
 
 bench: setup
 	.venv/bin/python benchmarks/render.py

@@ -9,12 +9,12 @@ import re
 import numpy as np
 import pytest
 
+from helpers import negative_zeros
 from markerplace.cli.main import join_signed_values, main
 from markerplace.runtime.atomic_io import JSON_DIGITS, clean_array, clean_numbers, fixed, write_json
 
 LONG_FLOAT = re.compile(r"-?\d+\.\d{13,}")
 """More decimals than the floats written here can have (all are above 0.1 or zero)."""
-NEGATIVE_ZERO = re.compile(r"-0(\.0+)?(?![.\de])")
 
 
 def test_write_json_cleans_every_float(tmp_path):
@@ -22,7 +22,7 @@ def test_write_json_cleans_every_float(tmp_path):
            "e": [np.int64(3), True, None, "x", float("inf")], "f": (2.675, -1e-20)}
     write_json(tmp_path / "x.json", obj)
     text = (tmp_path / "x.json").read_text()
-    assert not NEGATIVE_ZERO.search(text) and not LONG_FLOAT.search(text), text
+    assert not negative_zeros(text) and not LONG_FLOAT.search(text), text
     back = json.loads(text)
     assert back["a"] == 11.1 and back["b"] == 0.0 and back["c"] == 0.3 and back["d"] == [[0.0, 0.333333333333]]
     assert back["e"] == [3, True, None, "x", float("inf")] and back["f"] == [2.675, -1e-20]
@@ -32,6 +32,15 @@ def test_write_json_cleans_every_float(tmp_path):
     assert clean_numbers(clean_numbers(obj)) == clean_numbers(obj)  # idempotent
     # survey coordinates keep 9 decimals (12 significant digits would drop below a micrometre)
     assert clean_numbers([5412345.123456789, 912345.1234567891]) == [5412345.123456789, 912345.123456789]
+
+
+def test_negative_zeros_are_numbers_never_parts_of_a_path():
+    """The tests' negative-zero finder reads numbers only: pytest's first temporary folder on a
+    machine (``pytest-0``) and names like ``scan-0.0`` are no match."""
+    text = ('wrote /tmp/pytest-of-root/pytest-0/test_x0/check.csv\n{"dx": -0.0, "dy": -0.057, "p": "a/scan-0.0/b"}\n'
+            "moved -0.000 m, at (-0, 1.50), 1e-05,-0.00m,x=-0.0e+00")
+    assert negative_zeros(text) == ["-0.0", "-0.000", "-0", "-0.00m", "-0.0e+00"]
+    assert negative_zeros("/tmp/pytest-of-root/pytest-0/ -0.5 -10 -0.01 0.0") == []
 
 
 def test_a_marker_read_from_json_is_the_one_written():

@@ -4,11 +4,13 @@ in pyproject.toml puts ``tests/`` on the path), and the places the tests read fr
 The modules: :mod:`helpers.consumers` (the robots' tag-map readers), :mod:`helpers.hostile_meshes`
 (the hostile mesh corpus), :mod:`helpers.interrupts` (process-group SIGINT), :mod:`helpers.loopback`
 (silent and garbage servers on 127.0.0.1), :mod:`helpers.official_tags` (the official tag36h11
-images) and :mod:`helpers.printed_tags` (tags.pdf rasterized).
+images), :mod:`helpers.printed_tags` (tags.pdf rasterized) and :mod:`helpers.atlas_scenes` (a
+scan-like room of several texture atlases).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,3 +29,15 @@ FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 
 FAST_2_YAWS = ["--grid-spacing", "1.0", "--yaws", "2", "--workers", "1", "--quiet"]
 """:data:`FAST` with 2 yaws: quicker still, for tests that look at the outputs, not the scores."""
+
+_TOKEN_SEPARATORS = re.compile(r"""[\s,;:()\[\]{}=<>|"']+""")
+_NEGATIVE_ZERO = re.compile(r"-0(\.0+)?(e[+-]?\d+)?(m|%)?")
+
+
+def negative_zeros(text: str) -> list[str]:
+    """The numbers of ``text`` (printed output, CSV, JSON, YAML) that read as a negative zero
+    (``-0``, ``-0.0``, ``-0.000 m``, ``-0.0e+00``); not ``-0.057``, and never part of a path or
+    name: the text is cut at white space and punctuation, and only whole pieces count, so a
+    temporary folder such as ``pytest-of-user/pytest-0/`` (pytest's first run on a machine) is
+    no match."""
+    return [t for t in _TOKEN_SEPARATORS.split(text) if _NEGATIVE_ZERO.fullmatch(t)]

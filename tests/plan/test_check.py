@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import json
-import re
 
 import numpy as np
 import pytest
 
+from helpers import negative_zeros
 from markerplace.cli.main import main
-
-NEGATIVE_ZERO = re.compile(r"-0(\.0+)?(?![.\d])")
-"""-0, -0.0, -0.000 (not -0.057)."""
-
 
 @pytest.fixture(scope="module")
 def plan(run_plan):
@@ -64,7 +60,7 @@ def test_installed_as_planned_loses_nothing(plan, tmp_path, capsys):
     scores = np.load(plan / "scores.npz")
     assert report["summary"]["mean_score_planned"] == pytest.approx(scores["score_after"].mean(), abs=1e-9)
     text = capsys.readouterr().out
-    assert "no camera location lost anything" in text and not NEGATIVE_ZERO.search(text)
+    assert "no camera location lost anything" in text and not negative_zeros(text)
     assert missing_marks(out / "check_map.png") == 0
 
 
@@ -116,7 +112,7 @@ def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
     assert [w["score_lost"] for w in worst] == sorted((w["score_lost"] for w in worst), reverse=True)
     assert "camera locations that lost most" in text and f"storey 0 (floor 0.00 m) at ({worst[0]['x']:.2f}" in text
     for written in (text, (out / "check.csv").read_text(), (out / "check.json").read_text()):
-        assert not NEGATIVE_ZERO.search(written), NEGATIVE_ZERO.search(written)
+        assert not negative_zeros(written), negative_zeros(written)
     assert missing_marks(out / "check_map.png") > 0  # the missing tag is marked on the map
     assert len((out / "check.csv").read_text().strip().splitlines()) == 1 + 5
     layout = json.loads((out / "tagmaps" / "wpilib_field_layout.json").read_text())
