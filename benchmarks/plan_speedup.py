@@ -21,6 +21,11 @@ Prints ``name: value`` lines.
 
     .venv/bin/python benchmarks/plan_speedup.py [--scene house-scan] [--baseline fa74cb0]
         [--work out/bench_speedup] [-k 10] [--workers 2] [--order baseline-first|current-first]
+        [--baseline-args="..."] [--current-args="..."]
+
+``--baseline HEAD --current-args="--observe-views location"`` compares a setting of today's code
+with its default in the same run (``HEAD`` is unpacked like any commit, so uncommitted changes
+are only in ``current``).
 """
 
 from __future__ import annotations
@@ -78,11 +83,13 @@ def children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def run_plan(label: str, src: Path, plan_scene: list[str], out: Path, args) -> dict:
-    """One ``plan`` process with ``src`` first on its path; its wall, CPU and peak memory."""
+def run_plan(label: str, src: Path, plan_scene: list[str], out: Path, args, extra: str = "") -> dict:
+    """One ``plan`` process with ``src`` first on its path (and ``extra`` plan arguments); its
+    wall, CPU and peak memory."""
     shutil.rmtree(out, ignore_errors=True)
     env = dict(os.environ, PYTHONPATH=str(src))
-    cmd = [markerplace_exe(), "plan", *plan_scene, "-k", str(args.k), "--out", str(out), "--workers", str(args.workers)]
+    cmd = [markerplace_exe(), "plan", *plan_scene, "-k", str(args.k), "--out", str(out), "--workers", str(args.workers),
+           *extra.split()]
     emit(f"{label}.command", f"PYTHONPATH={src} " + " ".join(cmd))
     cpu0, t0 = children_cpu(), time.perf_counter()
     with open(out.with_suffix(".log"), "w") as log:
@@ -122,6 +129,8 @@ def main() -> int:
     ap.add_argument("-k", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--order", default="baseline-first", choices=("baseline-first", "current-first"))
+    ap.add_argument("--baseline-args", default="", help="more plan arguments for the baseline")
+    ap.add_argument("--current-args", default="", help="more plan arguments for the current code")
     args = ap.parse_args()
     work = Path(args.work).resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -133,7 +142,9 @@ def main() -> int:
                                    text=True).stdout.strip())
     emit("cpus", os.cpu_count())
     labels = ["baseline", "current"] if args.order == "baseline-first" else ["current", "baseline"]
-    runs = {label: run_plan(label, codes[label], plan_scene, work / f"plan_{label}", args) for label in labels}
+    extra = {"baseline": args.baseline_args, "current": args.current_args}
+    runs = {label: run_plan(label, codes[label], plan_scene, work / f"plan_{label}", args, extra[label])
+            for label in labels}
     figs = {label: plan_figures(work / f"plan_{label}") for label in labels}
     emit("area.open_floor_m2", figs["current"]["area"])
     emit("poses", figs["current"]["poses"])

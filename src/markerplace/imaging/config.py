@@ -6,8 +6,12 @@ from dataclasses import dataclass, field, replace
 
 from markerplace.geometry import Intrinsics
 from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
+from markerplace.settings import setting
 
-__all__ = ["ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT", "renders_alike"]
+OBSERVE_VIEWS = ("pose", "location-renders", "location-features")
+"""Values of :attr:`ImagingConfig.observe_views`."""
+
+__all__ = ["OBSERVE_VIEWS", "ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT", "renders_alike"]
 
 
 @dataclass(frozen=True)
@@ -25,6 +29,12 @@ class ImagingConfig:
         visibility_margin_px: for "may this marker change the image": samples up to this many
             pixels outside the image still count as inside (conservative).
         visibility_grid: samples per side of a marker's drawn quad for that test.
+        observe_views: how plan's observe stage looks at a camera location: ``pose`` renders
+            and extracts every pose; ``location-renders`` renders every other yaw as a larger
+            face, the yaws between get their image resampled from the two faces (SIFT per
+            pose); ``location-features`` also gives the yaws between the faces' features (SIFT
+            per face) (:mod:`markerplace.imaging.location_views`). Planning only: the testbed
+            renders every image.
     """
 
     camera: Intrinsics = field(default_factory=Intrinsics)
@@ -33,10 +43,15 @@ class ImagingConfig:
     occlusion_tolerance: float = 0.10
     visibility_margin_px: float = 16.0
     visibility_grid: int = 7
+    observe_views: str = setting("pose", flag="--observe-views", choices=lambda: OBSERVE_VIEWS, commands=("plan",),
+                                 help="how observe looks at a camera location: pose (render and extract every "
+                                      "pose), location-renders (every other yaw rendered as a larger view, the "
+                                      "yaws between resampled from it: half the renders) or location-features "
+                                      "(also their features taken from it: half the renders and SIFT)")
 
 
 def renders_alike(a: ImagingConfig, b: ImagingConfig) -> bool:
     """True when ``a`` and ``b`` make the same images (camera, depth and visibility settings)
     and differ at most in the feature preset: one render can then feed both extractions (the
     plan's observe and the testbed's marker-free map)."""
-    return replace(a, sift=b.sift) == b
+    return replace(a, sift=b.sift, observe_views=b.observe_views) == b

@@ -75,12 +75,16 @@ class ImagingEngine:
             self._markers = key
         return self.renderer.render(world_from_cam, rgb=rgb, depth=True, normal=False)
 
-    def features(self, result, tags: bool = False, sift: SiftConfig | None = None) -> ImageFeatures:
+    def features(self, result, tags: bool = False, sift: SiftConfig | None = None,
+                 K: np.ndarray | None = None) -> ImageFeatures:
         """SIFT of a render (the engine's preset, or ``sift``), each keypoint lifted to 3D by the
         rendered depth (NaN beyond ``max_depth`` or at depth edges); with ``tags``, the detected
-        tag36h11 tags too."""
+        tag36h11 tags too. ``K``: the (3, 3) camera of ``result`` when not the engine's (an
+        image made from a render, :mod:`markerplace.imaging.location_views`)."""
         kp, desc = extract_sift(result.rgb, self.config.sift if sift is None else sift)
-        pts, valid = lift_to_3d(kp, result.depth, self.K, result.world_from_cam, max_depth=self.config.max_depth)
+        pts, valid = lift_to_3d(kp, result.depth, self.K if K is None else K, result.world_from_cam,
+                                max_depth=self.config.max_depth,
+                                image_size=(result.rgb.shape[1], result.rgb.shape[0]))
         pts = np.where(valid[:, None], pts, np.nan)
         ids = np.zeros(0, np.int32)
         corners = np.zeros((0, 4, 2), np.float32)

@@ -32,6 +32,9 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig, renders_alike
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
+from markerplace.imaging.location_views import (FaceLayout, crop, face_layout, location_groups, split_features,
+                                                 unoccluded_from_faces, warp_view)
+from markerplace.render.renderer import RenderResult
 from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
@@ -81,6 +84,59 @@ def _observe_task(engine, item):
                               {"marker_in_view": engine.in_view(res, "quads")})
 
 
+def _observe_location_task(engine, item):
+    """(the location's (n, 4, 4) poses, (n, C) candidate masks, (n,) observations wanted, the
+    :class:`FaceLayout`, whether the odd poses share the faces' features) -> per pose its 3D
+    features and candidate occlusion, None where not wanted. The even poses are rendered as
+    faces; an odd pose takes its neighbours' features (``share_features``) or SIFT of the image
+    resampled from them (:mod:`markerplace.imaging.location_views`)."""
+    poses, masks, wanted, layout, share_features = item
+    n, K = len(poses), layout.camera.K
+    need = {j for j in range(0, n, 2) if wanted[j]}
+    need |= {k % n for j in range(1, n, 2) if wanted[j] for k in (j - 1, j + 1)}
+    faces = {j: engine.render(poses[j]) for j in sorted(need)}
+    face_feats = {j: engine.features(r).with_3d_only() for j, r in faces.items()} if share_features else {}
+    samples = engine.spec.samples["candidates"]
+    tolerance = engine.config.occlusion_tolerance
+    out = []
+    for j in range(n):
+        if not wanted[j]:
+            out.append(None)
+            continue
+        used = [j] if j % 2 == 0 else [j - 1, (j + 1) % n]
+        if share_features:
+            feats = split_features(layout, poses[j], [(poses[u], face_feats[u]) for u in used])
+        else:
+            if j % 2 == 0:
+                rgb, depth = crop(layout, faces[j].rgb), crop(layout, faces[j].depth)
+            else:
+                rgb, depth = warp_view(layout, poses[j], [(poses[u], faces[u].rgb, faces[u].depth) for u in used])
+            feats = engine.features(RenderResult(rgb, depth, None, poses[j]), K=K).with_3d_only()
+        unoccluded = np.zeros(len(samples), bool)
+        sel = np.flatnonzero(masks[j])
+        if len(sel):
+            unoccluded[sel] = unoccluded_from_faces(layout, poses[j], [(poses[u], faces[u].depth) for u in used],
+                                                    samples[sel], tolerance)
+        out.append(ImageFeatures(feats.keypoints, feats.descriptors, feats.points_world,
+                                 extras={"candidate_unoccluded": unoccluded}))
+    return out
+
+
+def _location_layout(world_from_cam: np.ndarray, config: ImagingConfig, allowed: bool) -> FaceLayout | None:
+    """The face layout when ``config.observe_views`` is not ``pose`` and it can serve these poses
+    (and only observations are made: the map images must be real renders), else None."""
+    if config.observe_views == "pose" or not allowed or len(world_from_cam) == 0:
+        return None
+    layout = face_layout(world_from_cam, location_groups(world_from_cam), config.camera)
+    if layout is None:
+        log.info("observe: the poses of a location cannot share renders (too few yaws for the camera's field of "
+                 "view); rendering every pose")
+    else:
+        log.info("observe: one %dx%d face per two poses of a location (--observe-views %s)",
+                 layout.face.width, layout.face.height, config.observe_views)
+    return layout
+
+
 def _check_map_output(map_output: MapOutput, config: ImagingConfig) -> None:
     if not renders_alike(map_output.config, config):
         raise ValueError("observe: the map's imaging settings differ from observe's beyond the SIFT preset")
@@ -120,7 +176,8 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
         grid = map_output.config.visibility_grid
         samples["quads"] = marker_points(candidate_world_from_marker, tag_sizes, grid=grid) if C \
             else np.zeros((0, grid * grid, 3))
-    job = imaging_job(EngineSpec(scene_spec, config, samples))
+    layout = _location_layout(world_from_cam, config, map_output is None and observations)
+    job = imaging_job(EngineSpec(scene_spec, config if layout is None else layout.face_config(config), samples))
     writers = [FeatureWriter(folder, N, key) if observations else None]
     if map_output is not None:
         writers.append(FeatureWriter(map_output.folder, N, map_output.key))
@@ -130,14 +187,25 @@ def observe(scene_spec, world_from_cam: np.ndarray, candidate_in_view: np.ndarra
         log.info("observe: resuming, %d of %d poses already done", N - len(todo), N)
     mask = candidate_in_view if C else np.zeros((N, 0), bool)
     map_sift = None if map_output is None else map_output.config.sift
-    items = [(world_from_cam[i], mask[i], map_sift, i not in done[0]) for i in todo]
     with progress_bar(N, "observe" if observations else "map (no markers)", "pose", progress,
                       initial=N - len(todo)) as bar:
-        for j, result in executor.map(_observe_task, items, job):
-            for writer, d, feats in zip(writers, done, result if map_output is not None else (result,)):
-                if todo[j] not in d:
-                    writer.add(todo[j], feats)
-            bar.update()
+        if layout is not None:
+            groups = [g for g in location_groups(world_from_cam) if any(i not in done[0] for i in g)]
+            share = config.observe_views == "location-features"
+            items = [(world_from_cam[g], mask[g], np.array([i not in done[0] for i in g]), layout, share)
+                     for g in groups]
+            for j, results in executor.map(_observe_location_task, items, job):
+                for i, feats in zip(groups[j], results):
+                    if feats is not None:
+                        writers[0].add(int(i), feats)
+                        bar.update()
+        else:
+            items = [(world_from_cam[i], mask[i], map_sift, i not in done[0]) for i in todo]
+            for j, result in executor.map(_observe_task, items, job):
+                for writer, d, feats in zip(writers, done, result if map_output is not None else (result,)):
+                    if todo[j] not in d:
+                        writer.add(todo[j], feats)
+                bar.update()
     if map_output is not None:
         writers[1].finish()
         write_npy(map_output.folder / MARKER_SAMPLES, samples["quads"])
