@@ -19,8 +19,8 @@ Prints ``name: value`` lines.
   ``size_check`` (the run-size sample renders), ``observe`` (from ``observe: rendering`` to
   ``observe: N features``), ``similarity`` (to its summary line), ``score`` (its logged seconds,
   then the placement calibration), ``place`` (to ``...: placed N markers``) and
-  ``deliverables`` (files, report.html, process exit). Per window: wall s, CPU s and peak RSS
-  MiB of the tree.
+  ``deliverables`` (files, report.html, process exit). Per window: wall s, CPU s (and its system,
+  i.e. kernel, part) and peak RSS MiB of the tree.
 * per pose of the observe stage, on ``--sample`` of the run's own poses (spread evenly; the
   discretization is read from ``DIR``), in this process: render (RGB and depth), SIFT (the
   scoring preset), lifting keypoints to 3D (and dropping those without), the candidate
@@ -79,12 +79,13 @@ class TreeSampler:
         self.proc = psutil.Process(pid)
         self.period = period
         self.samples: list[tuple[float, float, float]] = []
+        self.system: list[float] = []  # system CPU s of the tree at each sample
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            rss = cpu = 0.0
+            rss = cpu = sys_s = 0.0
             try:
                 procs = [self.proc, *self.proc.children(recursive=True)]
             except psutil.Error:
@@ -94,9 +95,11 @@ class TreeSampler:
                     rss += p.memory_info().rss
                     c = p.cpu_times()
                     cpu += c.user + c.system + c.children_user + c.children_system
+                    sys_s += c.system + c.children_system
                 except psutil.Error:
                     pass
             self.samples.append((time.perf_counter(), rss / 2**20, cpu))
+            self.system.append(sys_s)
             self._stop.wait(self.period)
 
     def start(self) -> "TreeSampler":
@@ -106,6 +109,13 @@ class TreeSampler:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join()
+
+    def system_window(self, t0: float, t1: float) -> float:
+        """System (kernel) CPU s of the tree between two perf_counter times (nearest samples)."""
+        if not self.samples:
+            return float("nan")
+        times = np.array([s[0] for s in self.samples])
+        return self.system[int(np.argmin(np.abs(times - t1)))] - self.system[int(np.argmin(np.abs(times - t0)))]
 
     def window(self, t0: float, t1: float, end_cpu: float | None = None) -> tuple[float, float]:
         """(CPU s, peak RSS MiB) between two perf_counter times (nearest samples); ``end_cpu``:
@@ -174,6 +184,7 @@ def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str
         cpu, rss = sampler.window(a, b, end_cpu=cpu_total if name == "deliverables" else None)
         emit(f"stage.{name}.wall_s", b - a)
         emit(f"stage.{name}.cpu_s", cpu)
+        emit(f"stage.{name}.system_s", sampler.system_window(a, b))
         emit(f"stage.{name}.peak_rss_mib", rss)
     emit("stage.logged_seconds", first(lines, r"stage seconds:")[1].string.split("stage seconds: ")[-1])
     emit("plan.wall_s", t_end - t0)
