@@ -332,6 +332,33 @@ def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatc
     size_guard.measured_size_check(scene, spec, config, 5, force=True)(disc)  # --force: a warning only
 
 
+def test_measured_estimate_with_location_views_charges_half_a_face(monkeypatch):
+    """With --observe-views location-*, the sample renders faces and charges each pose half of
+    one; the features per pose stay those of a pose (the look-alike search's input)."""
+    from dataclasses import replace
+
+    from markerplace.pipelines import size_guard
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import discretize
+    from markerplace.scene.spec import SceneSpec
+
+    spec = SceneSpec("tiny", None, None, 0)
+    config = PlanConfig()
+    disc = discretize(spec.load(), config.discretize)
+    shapes = []
+    real = size_guard.ImagingEngine.render
+    monkeypatch.setattr(size_guard.ImagingEngine, "render",
+                        lambda self, *a, **k: shapes.append(real(self, *a, **k).rgb.shape[:2]) or real(self, *a, **k))
+    pose = size_guard.time_sample(spec, disc.world_from_cam, config.imaging, n=6)
+    assert set(shapes) == {(450, 600)}
+    for views in ("location-renders", "location-features"):
+        shapes.clear()
+        s = size_guard.time_sample(spec, disc.world_from_cam, replace(config.imaging, observe_views=views), n=6)
+        assert len(set(shapes)) == 1 and shapes[0][0] > 450 and shapes[0][1] > 600  # faces
+        assert s.render_seconds > 0 and s.feature_seconds > 0
+        assert 0.5 * pose.features_per_pose < s.features_per_pose < 1.5 * pose.features_per_pose
+
+
 def test_size_guard_counts_query_conditions_and_the_ceiling():
     """Every query condition renders and localizes the test images again, and the ceiling runs
     every candidate alone on the clean ones: the estimate grows with both (a corridor run with

@@ -25,19 +25,22 @@ from __future__ import annotations
 import logging
 import math
 import os
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from markerplace.errors import UserError
-from markerplace.plan.discretize.stage import discretize
-from markerplace.scene.worldframe import points_to_internal, world_offset
-from markerplace.progress import format_duration
-from markerplace.validation import OCCUPANCY_CELL
-import time
 import numpy as np
+
+from markerplace.errors import UserError
 from markerplace.imaging.engine import EngineSpec, ImagingEngine
+from markerplace.imaging.location_views import crop, face_layout, location_groups
+from markerplace.plan.discretize.stage import discretize
+from markerplace.progress import format_duration
+from markerplace.render.renderer import RenderResult
 from markerplace.runtime.workers import default_workers
+from markerplace.scene.worldframe import points_to_internal, world_offset
 from markerplace.testbed.marker_sets import NO_MARKERS, marker_set_count
+from markerplace.validation import OCCUPANCY_CELL
 
 log = logging.getLogger(__name__)
 
@@ -227,29 +230,40 @@ def time_sample(scene_spec, world_from_cam, imaging_config, n: int = SAMPLE_POSE
     """Render and extract features at ``n`` poses spread over ``world_from_cam`` ((N, 4, 4)) in
     this process, as a worker of the observe stage does (OpenCV on one thread), and time it;
     with ``map_sift`` (a SIFT preset), the testbed's map features (that preset and the tags)
-    too, as observe extracts them for ``plan --with-map``."""
+    too, as observe extracts them for ``plan --with-map``. With ``observe_views`` other than
+    ``pose``, the sampled poses are rendered as faces (:mod:`markerplace.imaging.location_views`)
+    and a pose is charged half a face render and SIFT of its crop (``location-renders``; the
+    resampling is not timed) or of half a face (``location-features``)."""
     import cv2
 
 
     poses = np.asarray(world_from_cam, float).reshape(-1, 4, 4)
     pick = np.unique(np.linspace(0, len(poses) - 1, max(2, n)).round().astype(int)) if len(poses) else []
+    layout = None
+    if imaging_config.observe_views != "pose" and map_sift is None and len(poses):
+        layout = face_layout(poses, location_groups(poses), imaging_config.camera)
+    # with faces, a pose costs half a face render, and SIFT of half a face or of its own image
+    share = layout is not None and imaging_config.observe_views == "location-features"
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     t0 = time.perf_counter()
-    engine = ImagingEngine(EngineSpec(scene_spec, imaging_config, {}))
+    engine = ImagingEngine(EngineSpec(scene_spec, imaging_config if layout is None else layout.face_config(imaging_config), {}))
     try:
         setup = time.perf_counter() - t0
         render, feature, feats = [], [], []
         for i in pick:
             t1 = time.perf_counter()
             res = engine.render(poses[i])
+            if layout is not None and not share:
+                res = RenderResult(crop(layout, res.rgb), crop(layout, res.depth), None, res.world_from_cam)
             t2 = time.perf_counter()
-            f = engine.features(res).with_3d_only()
+            f = engine.features(res, K=None if layout is None or share else layout.camera.K).with_3d_only()
             if map_sift is not None:
                 engine.features(res, tags=True, sift=map_sift)
-            render.append(t2 - t1)
-            feature.append(time.perf_counter() - t2)
-            feats.append(len(f.keypoints))
+            render.append((t2 - t1) / (1 if layout is None else 2))
+            feature.append((time.perf_counter() - t2) / (2 if share else 1))
+            feats.append(len(f.keypoints) * (layout.camera.width * layout.camera.height
+                                             / (layout.face.width * layout.face.height) if share else 1))
     finally:
         engine.close()
         cv2.setNumThreads(threads)
