@@ -148,8 +148,12 @@ def results_as_completed(client, futures: Sequence, address: str, wait_s: float)
     quiet_since = time.monotonic()
     while not pending.is_empty():
         if not pending.has_ready():
-            with pending.thread_condition:  # notified when a future finishes
-                pending.thread_condition.wait(timeout=0.2)
+            finished = getattr(pending, "thread_condition", None)  # notified when a future finishes
+            if finished is None:
+                time.sleep(0.05)
+            else:
+                with finished:
+                    finished.wait(timeout=0.2)
             if pending.has_ready() or time.monotonic() - quiet_since < POLL_S:
                 continue
             progress = f" ({done} of {n} tasks finished)"
