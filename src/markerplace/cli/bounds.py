@@ -30,6 +30,7 @@ _FIELD_BOUNDS = {
     "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
     "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
     "MARKER_SPACING": ("plan", "discretize.candidates.marker_spacing"), "WORKERS": ("plan", "runtime.workers"),
+    "CLUSTER_WAIT": ("plan", "runtime.cluster_wait"),
     "TESTS": ("evaluate", "test.tests"), "RUNS": ("evaluate", "study.runs"), "EVAL_K": ("evaluate", "study.ks"),
     "TAG_SCALE": ("evaluate", "study.tag_scale"), "SHIFT": ("evaluate", "study.shift"),
     "TEST_SEED": ("evaluate", "test.seed"),
@@ -95,7 +96,7 @@ def check_args(args) -> None:
     """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
     default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
     ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
-    with it). Whether a scheduler answers is checked once the output paths are
+    with it, ``--cluster-wait`` only with it). Whether a scheduler answers is checked once the output paths are
     (:func:`markerplace.runtime.cluster.check_scheduler`)."""
     for dest, bound in _bounds().get(command_name(args), {}).items():
         value = getattr(args, dest, None)
@@ -107,6 +108,9 @@ def check_args(args) -> None:
         parse_floats(args.start, "--start", ("X", "Y"), (COORDINATE, COORDINATE))
     if command_name(args) in ("evaluate", "study") and isinstance(getattr(args, "k", None), str):
         parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks"))
+    if getattr(args, "cluster_wait", None) is not None and getattr(args, "cluster", None) is None:
+        raise UserError(f"--cluster-wait {args.cluster_wait:g} has no effect without --cluster: it is how long to "
+                        "wait for the workers of a Dask cluster; leave it out, or give --cluster")
     if getattr(args, "cluster", None) is not None:
         parse_cluster(args.cluster)
         if getattr(args, "workers", 0):

@@ -34,6 +34,7 @@ from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.render.renderer import Renderer
 from markerplace.render.views import default_pose, write_render_outputs
 from markerplace.report.sheets import PAPER_CHOICES
+from markerplace.runtime import cache_home
 from markerplace.runtime.interrupt import InterruptGuard
 from markerplace.runtime.run_folder import close_all
 from markerplace.scene import load_scene
@@ -230,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
             setup_logging(quiet=args.quiet, verbose=args.verbose)
+            for note in cache_home.NOTE:  # the cache folder is not the one asked for (a service account)
+                (log.warning if cache_home.NOTE_IS_WARNING else log.info)("cache: %s", note)
             guard.resumable = args.command in RESUMABLE_COMMANDS
             func = getattr(args, "func", None)
             if func is None:

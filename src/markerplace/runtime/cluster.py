@@ -1,4 +1,4 @@
-"""``--cluster`` addresses: parsed, and checked against the server before any work.
+"""``--cluster`` addresses: parsed, checked against the server before any work, and watched.
 
 :func:`parse_cluster` accepts ``local:N`` (a Dask ``LocalCluster`` of N worker processes on this
 machine, 1 <= N <= its usable CPUs) and ``tcp://HOST:PORT`` / ``tls://HOST:PORT`` of a running
@@ -6,6 +6,11 @@ scheduler; anything else is a one-line :class:`~markerplace.errors.UserError`.
 :func:`check_scheduler` connects with a timeout and reads the handshake a Dask scheduler sends
 first, so a silent server or one answering garbage gives one line within seconds (Dask's own
 client would wait minutes, or try to allocate what the garbage announces).
+
+While the work runs, :mod:`markerplace.runtime.cluster_watch` watches the cluster: a scheduler
+without workers, workers that all leave and a scheduler that goes away each end in one line
+(exit code 2) instead of a wait without end or a traceback; workers that leave while others
+remain are Dask's to handle (it runs their tasks again on the others).
 """
 
 from __future__ import annotations

@@ -12,7 +12,9 @@ Backends (:func:`make_executor`):
 * ``PoolExecutor``: a spawned local process pool (the default, ``--workers N``).
 * ``DaskExecutor``: a Dask distributed cluster: ``--cluster tcp://HOST:8786`` uses a running
   scheduler, ``--cluster local:N`` starts a ``LocalCluster`` of N single-threaded worker
-  processes. Workers keep their state per job and thread between tasks.
+  processes. Workers keep their state per job and thread between tasks. A scheduler without
+  workers is waited for (``--cluster-wait``), lost workers and a lost scheduler end in one line
+  (:mod:`markerplace.runtime.cluster_watch`).
 
 Results do not depend on the backend: every item is computed the same way, and the caller
 puts results back in item order.
@@ -35,7 +37,10 @@ from typing import Any, Callable, Iterator, Sequence
 
 from markerplace.errors import UserError
 from markerplace.settings import setting
+from markerplace.runtime.cache_home import cache_root
 from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
+from markerplace.runtime.cluster_watch import (CLUSTER_WAIT_S, SchedulerLost, lost_scheduler, results_as_completed,
+                                               running_threads, silence_dask, wait_for_workers)
 from markerplace.runtime.workers import WORKER_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
 import signal
 
@@ -53,6 +58,8 @@ class RuntimeConfig:
         workers: local processes (0 = CPU count, at most 4; 1 = in this process).
         cluster: None (local processes), ``local:N`` (start a Dask ``LocalCluster`` of N
             workers) or a Dask scheduler address such as ``tcp://10.0.0.5:8786``.
+        cluster_wait: with ``cluster``: seconds to wait for a worker when the scheduler has none
+            (:func:`markerplace.runtime.cluster_watch.wait_for_workers`).
         batch: items per task (0 = automatic: about four tasks per worker, at most 32 items).
     """
 
@@ -64,6 +71,10 @@ class RuntimeConfig:
                                   help="run rendering + SIFT on a Dask cluster: local:N starts N local workers (N up "
                                        "to the CPU count), an address (tcp://HOST:PORT, tls://HOST:PORT) uses a "
                                        "running scheduler (results do not depend on where they run)")
+    cluster_wait: float = setting(CLUSTER_WAIT_S, flag="--cluster-wait", metavar="SECONDS", bounds=(0, 86400),
+                                  units="s", hint="seconds to wait for a Dask worker, e.g. 60",
+                                  help="with --cluster: seconds to wait for a Dask worker when the scheduler has none "
+                                       "(when the work starts, or after every worker left) before stopping with an error")
     batch: int = 0
 
 
@@ -244,8 +255,9 @@ class DaskExecutor(Executor):
 
     name = "dask"
 
-    def __init__(self, address: str, batch: int = 0):
+    def __init__(self, address: str, batch: int = 0, cluster_wait: float = CLUSTER_WAIT_S):
         super().__init__(batch)
+        self.address, self.cluster_wait = address, float(cluster_wait)
         try:
             import dask
             from distributed import Client, LocalCluster
@@ -255,14 +267,15 @@ class DaskExecutor(Executor):
         self.client = None
         kind, n, _ = parse_cluster(address)
         timeouts = {"distributed.comm.timeouts.connect": f"{SCHEDULER_TIMEOUT_S:g}s"}
+        logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger("markerplace").level))
         try:
             if kind == "local":
-                logging.getLogger("distributed").setLevel(max(logging.WARNING,
-                                                              logging.getLogger("markerplace").level))
                 env = dict(WORKER_ENV)
+                scratch = cache_root()  # the workers' folders there, not in $TMPDIR/dask-scratch-space
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), children_without_sigint():
                     self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                 dashboard_address=":0")
+                                                 dashboard_address=":0",
+                                                 local_directory=None if scratch is None else str(scratch / "dask"))
                     self.client = Client(self._cluster)
             else:
                 check_scheduler(address)
@@ -272,21 +285,24 @@ class DaskExecutor(Executor):
                 except Exception as err:  # a scheduler that went away, a version clash, ...
                     reason = " ".join(str(err).split())[:200] or type(err).__name__
                     raise UserError(f"--cluster {address}: cannot use the Dask scheduler ({reason})") from None
-            info = self.client.scheduler_info()
+            try:
+                self.workers = running_threads(self.client)  # 0: waited for at the first map
+            except SchedulerLost:
+                raise lost_scheduler(address) from None
         except BaseException:
             self._aborted = True
             self.close()
             raise
-        self.workers = max(1, sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()))
         log.info("dask: %d worker thread(s) at %s", self.workers, self.client.scheduler.address)
 
     def _map(self, fn, items, job):
-        from distributed import as_completed
-
+        # a scheduler without workers: wait for one (--cluster-wait) before sizing the batches
+        self.workers = wait_for_workers(self.client, self.address, self.cluster_wait)
         futures = [self.client.submit(_run_batch, job, fn, b, pure=False)
                    for b in _batches(items, self.batch_size(len(items)))]
-        for fut in as_completed(futures):  # left early: close() closes the client, the scheduler drops its tasks
-            yield from fut.result()
+        # left early: close() closes the client, the scheduler drops its tasks
+        for results in results_as_completed(self.client, futures, self.address, self.cluster_wait):
+            yield from results
 
     def close(self) -> None:
         """Close the worker states, the client and a ``LocalCluster``; after an aborted map
@@ -294,7 +310,7 @@ class DaskExecutor(Executor):
         abort = self.aborted
         timeout = CLOSE_TIMEOUT_S if abort else None
         if abort:
-            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            silence_dask()
             self._stop_local_workers()
         if self.client is not None:
             if not abort:
@@ -304,14 +320,14 @@ class DaskExecutor(Executor):
                     log.debug("closing dask worker states failed", exc_info=True)
             try:
                 self.client.close(timeout=timeout)
-            except Exception:  # pragma: no cover - teardown
-                log.debug("closing the dask client failed", exc_info=True)
+            except Exception as err:  # pragma: no cover - teardown (after an abort: the short timeout, one line)
+                log.debug("closing the dask client failed: %s", err, exc_info=not abort)
             self.client = None
         if self._cluster is not None:
             try:
                 self._cluster.close(timeout=timeout)
-            except Exception:  # pragma: no cover - teardown
-                log.debug("closing the dask cluster failed", exc_info=True)
+            except Exception as err:  # pragma: no cover - teardown (after an abort: the short timeout, one line)
+                log.debug("closing the dask cluster failed: %s", err, exc_info=not abort)
             self._cluster = None
 
     def _stop_local_workers(self) -> None:
@@ -330,7 +346,7 @@ class DaskExecutor(Executor):
 def make_executor(config: RuntimeConfig = RuntimeConfig()) -> Executor:
     """The executor ``config`` names (see :class:`RuntimeConfig`)."""
     if config.cluster:
-        return DaskExecutor(config.cluster, config.batch)
+        return DaskExecutor(config.cluster, config.batch, config.cluster_wait)
     workers = default_workers(config.workers)
     if workers <= 1:
         return InProcessExecutor(config.batch)

@@ -42,6 +42,8 @@ from contextlib import contextmanager
 from multiprocessing import synchronize, util
 from typing import Iterator
 
+from markerplace.runtime.cache_home import remove_temporary
+
 __all__ = ["Terminated", "InterruptGuard", "deferred", "raise_if_stopping", "stop_children", "release_semaphores",
            "exit_code", "resume_message", "GRACE_S", "CHILD_WAIT_S"]
 
@@ -282,5 +284,6 @@ class InterruptGuard:
         try:
             stop_children(self.child_wait_s)
             release_semaphores()
+            remove_temporary()  # a temporary cache folder (os._exit runs no atexit)
         finally:
             os._exit(exit_code(self.signum or signum))

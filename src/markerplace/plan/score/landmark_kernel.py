@@ -7,9 +7,9 @@ it fast: one pass over the landmarks of each pose, the 2x6 whitened Jacobian kep
 and the 21 distinct entries of the symmetric 6x6 sum accumulated as scalars, poses spread over
 threads with ``numba.prange``.
 
-The kernel is compiled on first use and cached on disk by numba (``cache=True``: the
-``__pycache__`` folder next to this file, ``~/.cache/numba`` when that is read-only, or
-``NUMBA_CACHE_DIR``), so later processes start without compiling. Fast-math allows
+The kernel is compiled on first use and cached on disk by numba (``cache=True``: in
+``NUMBA_CACHE_DIR``, which importing markerplace points at ``$MARKERPLACE_CACHE/numba``,
+:mod:`markerplace.runtime.cache_home`), so later processes start without compiling. Fast-math allows
 reassociation (vectorized sums) but not FMA contraction: with contraction the freshly compiled
 kernel and the one loaded from the cache gave results differing in the last bits, so the first
 ``plan`` after an install did not reproduce later ones bit for bit.
