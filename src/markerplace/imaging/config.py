@@ -34,7 +34,10 @@ class ImagingConfig:
             face, the yaws between get their image resampled from the two faces (SIFT per
             pose); ``location-features`` also gives the yaws between the faces' features (SIFT
             per face) (:mod:`markerplace.imaging.location_views`). Planning only: the testbed
-            renders every image.
+            renders every image, and a run that also makes the testbed's map images
+            (``evaluate``, ``plan --with-map``, a success model) observes per pose. Default
+            ``location-renders``: its fidelity to ``pose`` is measured in
+            benchmarks/observe_views.py (docs/results/benchmarks.md).
     """
 
     camera: Intrinsics = field(default_factory=Intrinsics)
@@ -43,7 +46,7 @@ class ImagingConfig:
     occlusion_tolerance: float = 0.10
     visibility_margin_px: float = 16.0
     visibility_grid: int = 7
-    observe_views: str = setting("pose", flag="--observe-views", choices=lambda: OBSERVE_VIEWS, commands=("plan",),
+    observe_views: str = setting("location-renders", flag="--observe-views", choices=lambda: OBSERVE_VIEWS, commands=("plan",),
                                  help="how observe looks at a camera location: pose (render and extract every "
                                       "pose), location-renders (every other yaw rendered as a larger view, the "
                                       "yaws between resampled from it: half the renders) or location-features "

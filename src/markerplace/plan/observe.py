@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -220,7 +220,9 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
                 map_output: MapOutput | None = None) -> tuple[FeatureSet, str]:
     """The observe stage of a run folder: ``run_dir/observations/``, reused while the
     discretization (its key and file digest), the imaging settings, the tag drawing and the
-    marker poses and sizes are unchanged; an interrupted stage resumes from its parts.
+    marker poses and sizes are unchanged; an interrupted stage resumes from its parts. When it
+    must run and also write the map features, it observes per pose (``observe_views`` ``pose``,
+    and so keyed): those renders serve both.
 
     Args:
         world_from_cam: (N, 4, 4) the discretization's camera poses.
@@ -235,8 +237,17 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
     Returns:
         (the features, the stage's cache key).
     """
-    key = cache.hash_of("observe-v3", DRAWING_VERSION, disc_key, cache.content_digest(run_dir / "discretization.npz"),
-                        config, marker_poses, sizes)
+    def key_of(config: ImagingConfig) -> str:
+        return cache.hash_of("observe-v3", DRAWING_VERSION, disc_key, cache.content_digest(run_dir / "discretization.npz"),
+                             config, marker_poses, sizes)
+
+    key = key_of(config)
+    if map_output is not None and config.observe_views != "pose" and not cache.is_fresh(run_dir / "observations", key) \
+            and not cache.is_fresh(map_output.folder, map_output.key):
+        # one render per pose gives both the observations and the map images (which must be
+        # the renders of their poses): cheaper than faces plus a second pass for the map
+        config = replace(config, observe_views="pose")
+        key = key_of(config)
 
     def compute() -> FeatureSet:
         log.info("observe: rendering and extracting SIFT at %d poses", len(world_from_cam))
