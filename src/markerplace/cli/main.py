@@ -22,6 +22,7 @@ from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_f
 from markerplace.cli.plan_frames import add_frames_args, cmd_plan_frames
 import numpy as np
 from markerplace.cli.bounds import check_args
+from markerplace.cli.edge import StdoutError, StdoutGuard, check_working_directory, resource_error
 from markerplace.cli.check import add_check_parser
 from markerplace.cli.evaluate import add_evaluate_parser
 from markerplace.cli.export import add_export_parser
@@ -225,30 +226,50 @@ RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    with InterruptGuard() as guard:
+    with InterruptGuard() as guard, StdoutGuard() as stdout:
         try:
-            parser = build_parser()
-            args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
-            setup_logging(quiet=args.quiet, verbose=args.verbose)
-            guard.resumable = args.command in RESUMABLE_COMMANDS
-            func = getattr(args, "func", None)
-            if func is None:
-                # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
-                if args.command == "scene":
-                    parser.parse_args(["scene", "--help"])
-                parser.print_help()
-                return 2
-
-            check_args(args)  # every numeric option of every subcommand: finite and in range
             try:
-                code = int(func(args) or 0)
-                if guard.signum is not None:  # a signal whose exception was swallowed on the way
-                    return guard.stopped(KeyboardInterrupt())
-                return code
+                check_working_directory()
+                code = _run(list(sys.argv[1:] if argv is None else argv), guard)
             finally:
-                close_all()  # unlock the run folders; one the run wrote nothing into is left as found
+                sys.stdout.flush()  # a full disk shows here, not in Python's flush at exit
+            return code
+        except StdoutError as err:
+            stdout.silence()
+            if not err.quiet:
+                print(f"markerplace: error: {err}", file=sys.stderr)
+            return err.exit_code
         except UserError as err:
             print(f"markerplace: error: {err}", file=sys.stderr)
             return err.exit_code
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (runtime.interrupt.Terminated)
             return guard.stopped(err)
+        except (MemoryError, OSError, ImportError) as err:  # ulimit -n, ulimit -v, no memory: one line (cli.edge)
+            short = resource_error(err, guard.resumable)
+            if short is None:
+                raise
+            print(f"markerplace: error: {short}", file=sys.stderr)
+            return short.exit_code
+
+
+def _run(argv: list[str], guard: InterruptGuard) -> int:
+    """Parse ``argv`` and run its command (:func:`main` catches what it raises)."""
+    parser = build_parser()
+    args = parser.parse_args(join_signed_values(argv))
+    setup_logging(quiet=args.quiet, verbose=args.verbose)
+    guard.resumable = args.command in RESUMABLE_COMMANDS
+    func = getattr(args, "func", None)
+    if func is None:
+        # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
+        if args.command == "scene":
+            parser.parse_args(["scene", "--help"])
+        parser.print_help()
+        return 2
+    check_args(args)  # every numeric option of every subcommand: finite and in range
+    try:
+        code = int(func(args) or 0)
+        if guard.signum is not None:  # a signal whose exception was swallowed on the way
+            return guard.stopped(KeyboardInterrupt())
+        return code
+    finally:
+        close_all()  # unlock the run folders; one the run wrote nothing into is left as found
