@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Iterable
 
 from markerplace.errors import UserError, write_error
-from markerplace.runtime.run_lock import RunLock
+from markerplace.runtime.run_lock import RunLock, check_bookkeeping
 from markerplace import __version__
 from markerplace.output_checks import check_output_dir
 
@@ -304,6 +304,7 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
     if link is not None:
         raise RunFolder(given, option)._link_error(Path(link))
     check_output_dir(given, option)
+    check_bookkeeping(Path(real), (MARKER, MANIFEST), f"{option} {given}")  # the lock: RunLock.acquire
     made = [Path(os.path.abspath(p)) for p in (given, *given.parents) if not os.path.lexists(p)][::-1]
     try:
         given.mkdir(parents=True, exist_ok=True)

@@ -10,11 +10,11 @@ stale, one from another host is refused.
 
 from __future__ import annotations
 
-import errno
 import json
 import logging
 import os
 import socket
+import stat
 import time
 from pathlib import Path
 
@@ -23,7 +23,26 @@ import fcntl
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunLock", "pid_alive"]
+__all__ = ["RunLock", "pid_alive", "odd_entry", "check_bookkeeping"]
+
+
+def odd_entry(path: Path, links_too: bool = False) -> str | None:
+    """What ``path`` is when it is neither missing nor a plain file (a folder, a named pipe, a
+    socket, a device; with ``links_too`` also a symbolic link or a file with several hard links,
+    whose other names would see every write), else None."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"),
+             (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device"))
+    what = next((name for test, name in kinds if test(st.st_mode)), None)
+    if what is None and links_too:
+        if stat.S_ISLNK(st.st_mode):
+            what = "a symbolic link"
+        elif st.st_nlink > 1:
+            what = f"a hard link (one of {st.st_nlink} names of the same file, which markerplace would overwrite)"
+    return what
 
 
 def pid_alive(pid) -> bool:
@@ -63,6 +82,16 @@ def _read_path(lock: Path) -> dict | None:
     return None
 
 
+def check_bookkeeping(folder: Path, names, what: str) -> None:
+    """Refuse (one line) a folder, pipe, socket or device named like one of the bookkeeping files
+    ``names`` in ``folder`` (they are replaced whole, which such an entry does not allow)."""
+    for name in names:
+        odd = odd_entry(Path(folder) / name)
+        if odd is not None:
+            raise UserError(f"{what}: {Path(folder) / name} is {odd}, where markerplace keeps its bookkeeping file "
+                            f"{name}: remove it, then run again")
+
+
 class RunLock:
     """The lock file ``path`` of the run folder named ``what`` (for messages).
 
@@ -82,12 +111,20 @@ class RunLock:
         me = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
               "started": time.strftime("%Y-%m-%d %H:%M:%S")}
         for _ in range(20):
+            odd = odd_entry(self.path, links_too=True)
+            if odd is not None:
+                raise self.odd(odd)
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
             except OSError as err:
-                if err.errno == errno.ELOOP:
-                    raise UserError(f"{self.what}: {self.path} is a symbolic link; remove it") from None
+                odd = odd_entry(self.path, links_too=True)  # made in between
+                if odd is not None:
+                    raise self.odd(odd) from None
                 raise write_error(self.path, err) from None
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:  # swapped in since the check above
+                os.close(fd)
+                raise self.odd(odd_entry(self.path, links_too=True) or "not a plain file")
             holder = _read(fd)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -120,6 +157,11 @@ class RunLock:
             self._fd = fd
             return
         raise UserError(f"{self.what}: could not take the lock {self.path}; try again")
+
+    def odd(self, what: str) -> UserError:
+        """The one-line refusal of a lock path that is not a plain file of its own."""
+        return UserError(f"{self.what}: {self.path} is {what}, where markerplace keeps its lock file; markerplace "
+                         "never writes into it: remove it, then run again")
 
     def busy(self, holder: dict | None) -> UserError:
         """The one-line refusal naming the run that holds the lock."""
