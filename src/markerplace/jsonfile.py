@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.input_checks import check_input_file
 
 __all__ = ["read_json", "json_depth", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
 
@@ -57,10 +58,7 @@ def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JS
     """
     path = Path(path)
     what = what or str(path)
-    if path.is_dir():
-        raise UserError(f"{what} is a folder, not a JSON file")
-    if not path.is_file():
-        raise UserError(f"{what}: no such file")
+    check_input_file(path, what, "a JSON file")  # a folder, a FIFO, a device, a link loop: one line each
     try:
         size = path.stat().st_size
         if size > max_bytes:

@@ -12,6 +12,7 @@ from helpers import FAST
 from markerplace.cli.main import main
 from markerplace.errors import UserError
 from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import write_json
 
 
 def _make(kind: str, path, target) -> None:
@@ -29,7 +30,7 @@ def run(tmp_path):
     """A run folder markerplace made (marked, closed), and a file of the user's outside it."""
     folder = tmp_path / "run"
     run_folder.open_run_folder(folder, "test")
-    (folder / "kept.txt").write_text("x")  # something written: the folder stays
+    write_json(folder / "kept.json", {"x": 1})  # something written: the folder stays marked
     run_folder.close_all()
     target = tmp_path / "precious.txt"
     target.write_text("the user's own text")

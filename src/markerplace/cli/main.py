@@ -18,7 +18,7 @@ from markerplace.errors import UserError
 from markerplace.log import setup_logging
 from markerplace.pipelines.plan import PlanInputs, run_plan
 from markerplace.scene.spec import SceneSpec
-from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_from_args
+from markerplace.cli.options import add_force_arg, add_plan_args, add_scene_args, plan_config_from_args
 from markerplace.cli.plan_frames import add_frames_args, cmd_plan_frames
 import numpy as np
 from markerplace.cli.bounds import check_args
@@ -38,6 +38,7 @@ from markerplace.report.sheets import PAPER_CHOICES
 from markerplace.runtime.interrupt import InterruptGuard
 from markerplace.runtime.run_folder import close_all
 from markerplace.scene import load_scene
+from markerplace.scene.preflight import allow_large_models
 from markerplace.scene.builtin.catalogue import list_scenes
 from markerplace.scene.export import export_glb
 from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
@@ -142,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.add_argument("name", help="built-in scene name")
     p_export.add_argument("out", help="output path, e.g. office.glb")
     p_export.add_argument("--seed", type=int, default=0, help="seed of the procedural generator (default 0)")
+    add_force_arg(p_export)
     p_export.set_defaults(func=cmd_scene_export)
 
     p_render = sub.add_parser("render", help="render RGB, depth and normals of a scene at one camera pose")
@@ -152,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--width", type=int, default=600, help="image width in pixels (default 600)")
     p_render.add_argument("--height", type=int, default=450, help="image height in pixels (default 450)")
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    add_force_arg(p_render)
     p_render.set_defaults(func=cmd_render)
 
 
@@ -266,6 +269,7 @@ def _run(argv: list[str], guard: InterruptGuard) -> int:
         parser.print_help()
         return 2
     check_args(args)  # every numeric option of every subcommand: finite and in range
+    allow_large_models(getattr(args, "force", False))  # --force: a model file larger than the free memory too
     try:
         code = int(func(args) or 0)
         if guard.signum is not None:  # a signal whose exception was swallowed on the way

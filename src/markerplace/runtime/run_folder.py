@@ -97,6 +97,7 @@ class RunFolder:
         self.dirs: set[str] = set()
         self._made: list[Path] = []  # folders this open created, the run folder's parents first
         self._manifest_fh = None
+        self._pristine = False  # this open wrote the marker (a new, empty or adopted folder) and nothing else yet
         self.lock = RunLock(self.real / LOCK, f"{option} {self.path}")
 
     def relative(self, path) -> str | None:
@@ -138,6 +139,7 @@ class RunFolder:
             except OSError as err:
                 raise write_error(self.real / MANIFEST, err) from None
             self._apply(op, rel)
+            self._pristine = False
 
     def _mark(self, command: str) -> None:
         """Write the marker when the folder has none (made now, empty, or adopted)."""
@@ -152,6 +154,7 @@ class RunFolder:
         try:
             tmp.write_text(text)
             os.replace(tmp, marker)
+            self._pristine = True
         except OSError as err:
             tmp.unlink(missing_ok=True)
             raise write_error(marker, err) from None
@@ -252,7 +255,8 @@ class RunFolder:
         if not self.lock.held:
             return
         try:
-            if set(os.listdir(self.real)) <= set(BOOKKEEPING):  # nothing written: leave it as it was found
+            if set(os.listdir(self.real)) <= set(BOOKKEEPING) or self._pristine:
+                # nothing written: leave it as it was found (an adopted folder a refused run wrote nothing into too)
                 for name in (MARKER, MANIFEST):
                     (self.real / name).unlink(missing_ok=True)
         except OSError:
