@@ -5,14 +5,17 @@
 Every problem is a :class:`~markerplace.errors.UserError` with one line naming the file and the
 option: missing, a folder, larger than ``max_bytes``, not UTF-8, nested deeper than
 ``max_depth`` (checked on the text before parsing, so ``[`` x 100000 gives one line instead of
-Python's ``RecursionError``) or not valid JSON (with line and column). JSON's ``NaN`` and
-``Infinity`` constants are accepted here (placement.json holds ``NaN`` gains); the callers
-check that poses and sizes are finite.
+Python's ``RecursionError``), not valid JSON (with line and column), or holding a number that
+is not finite: Python's ``NaN``, ``Infinity`` and ``-Infinity`` (no JSON, but Python writes
+them) and numbers beyond a float (``1e400``) are refused wherever they are, so a plan folder
+whose placement.json was edited to hold one is refused by every reader (the tool itself writes
+``null`` for a value that is not a number, :func:`markerplace.runtime.atomic_io.write_json`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -40,6 +43,23 @@ def json_depth(data: bytes) -> int:
     a = np.frombuffer(stripped, dtype=np.uint8)
     step = np.isin(a, (ord("["), ord("{"))).astype(np.int64) - np.isin(a, (ord("]"), ord("}")))
     return int(np.cumsum(step).max()) if len(step) else 0
+
+
+def _non_finite(what: str):
+    def refuse(token: str):
+        raise UserError(f"{what} holds {token}, a NaN or infinite number, which JSON does not have: every number "
+                        "must be finite; fix or re-export it")
+    return refuse
+
+
+def _finite(what: str):
+    def number(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):  # 1e400
+            raise UserError(f"{what} holds {text[:40]}, a NaN or infinite number (too large for a float): every "
+                            "number must be finite; fix or re-export it")
+        return value
+    return number
 
 
 def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JSON_BYTES,
@@ -77,7 +97,7 @@ def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JS
         raise UserError(f"{what} nests arrays/objects {depth} deep, more than {max_depth}: not a file this tool "
                         "writes or reads; fix or re-export it")
     try:
-        return json.loads(text)
+        return json.loads(text, parse_constant=_non_finite(what), parse_float=_finite(what))
     except json.JSONDecodeError as err:
         raise UserError(f"{what} is not valid JSON ({err.msg} at line {err.lineno}, column {err.colno}); "
                         "fix or re-export it") from None

@@ -20,6 +20,11 @@ def test_the_probe_builds_its_inputs_and_cases(tmp_path):
     probe = _script()
     files = probe.make_fixtures(tmp_path)
     assert files["latin1_mtl"].exists() and files["gltf_missing"].exists()
+    files["silent"] = files["garbage"] = "tcp://127.0.0.1:9"  # the servers main() starts
     cases = probe.cases(tmp_path, files)
     assert len(cases) > 50
-    assert len({c.name for c in cases}) == len(cases)  # --only picks cases by name
+    every = [*cases, *probe.checked_input_cases(tmp_path, files), *probe.interrupt_cases(tmp_path, files),
+             *probe.folder_cases(tmp_path, files), *probe.issue50_cases(tmp_path, files)]
+    assert len({c.name for c in every}) == len(every)  # --only picks cases by name
+    assert len(probe.issue50_cases(tmp_path, files)) > 30
+    assert files["zeros.ply"].stat().st_size == 2 << 30 and files["claims"].exists()

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Iterable
 
 from markerplace.errors import UserError, write_error
-from markerplace.runtime.run_lock import RunLock, check_bookkeeping
+from markerplace.runtime.run_lock import RunLock, check_bookkeeping, release_readers
 from markerplace import __version__
 from markerplace.output_checks import check_output_dir
 
@@ -331,6 +331,7 @@ def close_all() -> None:
     """Close every run folder this process opened (the CLI calls it when a command ends)."""
     while _open:
         _open.pop().close()
+    release_readers()  # export, evaluate --plan: the plan folders read
 
 
 def find(path) -> RunFolder | None:

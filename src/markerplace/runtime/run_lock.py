@@ -23,7 +23,9 @@ import fcntl
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunLock", "pid_alive", "odd_entry", "check_bookkeeping"]
+__all__ = ["RunLock", "pid_alive", "odd_entry", "check_bookkeeping", "lock_for_reading", "release_readers"]
+
+_readers: dict[str, int] = {}  # lock path -> descriptor of a shared (reader's) flock this process holds
 
 
 def odd_entry(path: Path, links_too: bool = False) -> str | None:
@@ -108,6 +110,7 @@ class RunLock:
         return self._fd is not None
 
     def acquire(self, command: str) -> None:
+        _release_reader(self.path)  # this process read the folder first (check PLAN_DIR): it now writes it
         me = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
               "started": time.strftime("%Y-%m-%d %H:%M:%S")}
         for _ in range(20):
@@ -166,7 +169,8 @@ class RunLock:
     def busy(self, holder: dict | None) -> UserError:
         """The one-line refusal naming the run that holds the lock."""
         who = (f"pid {holder.get('pid')} on {holder.get('host')}, `markerplace {holder.get('command', '?')}` started "
-               f"{holder.get('started', '?')}") if holder else "its pid is not written yet"
+               f"{holder.get('started', '?')}") if holder else \
+            "one reading it (export, check or evaluate --plan) or one just starting"
         return UserError(f"{self.what} is in use by another markerplace run ({who}): wait for it to finish or choose "
                          f"another folder (a lock left by a crashed run on another host: delete {self.path})")
 
@@ -180,3 +184,67 @@ class RunLock:
             pass
         os.close(self._fd)
         self._fd = None
+
+
+def lock_for_reading(path: Path, what: str) -> None:
+    """Hold a shared ``flock`` on the lock file ``path`` while this process reads its run folder
+    (``export``, ``evaluate --plan``, ``check``: until :func:`release_readers`): a run writing the
+    folder (which holds it exclusively) makes this one line naming it, and no run starts writing
+    it meanwhile. Readers never write the file; one that finds it missing creates it empty, and
+    the last reader deletes an empty one. A folder that cannot be written (a read-only share) or
+    has no ``flock`` is read unlocked, unless a live run on this host is named in the file."""
+    path = Path(path)
+    key = os.path.abspath(path)
+    if key in _readers:
+        return
+    for _ in range(20):
+        odd = odd_entry(path, links_too=True)
+        if odd is not None:
+            raise RunLock(path, what).odd(odd)
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError:
+            return  # cannot be created here: read unlocked
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read(fd)
+            os.close(fd)
+            who = (f"pid {holder.get('pid')} on {holder.get('host')}, `markerplace {holder.get('command', '?')}` "
+                   f"started {holder.get('started', '?')}") if holder else "its pid is not written yet"
+            raise UserError(f"{what} is being written by another markerplace run ({who}): wait for it to finish, "
+                            "then run again") from None
+        except OSError:  # no flock here: a live writer on this host still refuses
+            holder = _read(fd)
+            os.close(fd)
+            if holder and holder.get("host") == socket.gethostname() and pid_alive(holder.get("pid")):
+                raise RunLock(path, what).busy(holder) from None
+            return
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            _readers[key] = fd
+            return
+        os.close(fd)  # deleted by its last holder meanwhile: take the new one
+    raise UserError(f"{what}: could not take the lock {path}; try again")
+
+
+def _release_reader(path: Path) -> None:
+    fd = _readers.pop(os.path.abspath(path), None)
+    if fd is None:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # the last holder: delete the empty file it left
+        if os.fstat(fd).st_size == 0 and os.fstat(fd).st_ino == os.stat(path).st_ino:
+            os.unlink(path)
+    except OSError:
+        pass  # another reader (or a writer) holds it: theirs now
+    os.close(fd)
+
+
+def release_readers() -> None:
+    """Let go of every shared lock :func:`lock_for_reading` took (the CLI calls it when a command ends)."""
+    for key in list(_readers):
+        _release_reader(Path(key))
