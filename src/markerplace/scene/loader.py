@@ -9,6 +9,10 @@ Axis conventions
 
 Checks and recentring (:mod:`markerplace.scene.sanity`)
 --------------------------------------------------------
+* Before anything is read (:mod:`markerplace.scene.preflight`): a named pipe, a device or a
+  link loop is named as such; the header must fit the file's size and format; texture sizes
+  are read from their headers (a huge one downscaled with a warning naming it); the memory the
+  load takes is compared with the free memory (``--force`` overrides).
 * Vertices with NaN/inf coordinates are dropped with the faces using them (a warning gives the
   counts); a file with more than 5 % such vertices is refused.
 * A model whose bounding-box centre lies more than 1 km from the origin (survey coordinates) is
