@@ -123,3 +123,10 @@ def test_check_out_the_plan_folder_itself_is_refused(copy, capsys):
     assert main(["check", str(copy), "--installed", str(copy / "placement.json"), "--out", str(copy), "--quiet"]) == 2
     _one_line(capsys, "is the plan folder itself: check writes its own tagmaps/")
     assert {p.name: p.read_bytes() for p in (copy / "tagmaps").iterdir()} == tagmaps
+
+
+def test_check_through_a_link_to_the_plan_reads_then_writes_it_without_locking_itself_out(copy, tmp_path):
+    link = tmp_path / "link"
+    link.symlink_to(copy)  # read_plan_folder's shared lock and the run folder's exclusive one: the same file
+    assert main(_reader("check", link, tmp_path)) == 0
+    assert not (copy / run_folder.LOCK).exists()

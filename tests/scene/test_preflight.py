@@ -154,3 +154,20 @@ def test_a_texture_over_the_side_limit_is_downscaled_with_a_warning_naming_it(tm
     monkeypatch.setattr(preflight, "MAX_TEXTURE_PIXELS", 1000)
     msg = _error(path)
     assert f"texture {tmp_path / 'wall.png'} is 200 x 100 pixels" in msg and "shrink it" in msg
+
+
+def test_glb_textures_are_sized_from_their_headers_and_named_when_downscaled(tmp_path, monkeypatch, caplog):
+    from markerplace.scene.export import export_glb
+
+    path = tmp_path / "tiny.glb"
+    export_glb(load_scene("tiny"), path)
+    sizes = preflight.texture_sizes(path, ".glb")
+    loaded = load_mesh_file(path)
+    assert {(t.height, t.width) for t in sizes} == {p.texture.shape[:2] for p in loaded.parts if p.texture is not None}
+    assert all(t.stored > 0 and t.name.startswith("tiny.glb image ") for t in sizes)
+    big = max(sizes, key=lambda t: max(t.width, t.height))
+    monkeypatch.setattr(preflight, "MAX_TEXTURE_SIDE", max(big.width, big.height) - 1)
+    with caplog.at_level(logging.WARNING, logger="markerplace"):
+        scene = load_mesh_file(path)
+    assert max(max(p.texture.shape[:2]) for p in scene.parts if p.texture is not None) < max(big.width, big.height)
+    assert f"texture {big.name} is {big.width} x {big.height} pixels" in caplog.text

@@ -194,7 +194,7 @@ def lock_for_reading(path: Path, what: str) -> None:
     the last reader deletes an empty one. A folder that cannot be written (a read-only share) or
     has no ``flock`` is read unlocked, unless a live run on this host is named in the file."""
     path = Path(path)
-    key = os.path.abspath(path)
+    key = os.path.realpath(path)  # the writer's RunLock names the real path (links above resolved)
     if key in _readers:
         return
     for _ in range(20):
@@ -232,7 +232,7 @@ def lock_for_reading(path: Path, what: str) -> None:
 
 
 def _release_reader(path: Path) -> None:
-    fd = _readers.pop(os.path.abspath(path), None)
+    fd = _readers.pop(os.path.realpath(path), None)
     if fd is None:
         return
     try:

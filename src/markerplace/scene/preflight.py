@@ -160,7 +160,7 @@ def _gltf_document(path: Path, ext: str) -> tuple[dict, int]:
     with open(path, "rb") as fh:
         if ext == ".gltf":
             return json.loads(fh.read().decode("utf-8-sig")), -1
-        _, _, chunk, _ = struct.unpack("<IIII", fh.read(16))
+        _, _, _, chunk, _ = struct.unpack("<IIIII", fh.read(20))  # magic, version, length; JSON chunk length, type
         doc = json.loads(fh.read(chunk).decode("utf-8"))
         header = fh.read(8)
         return doc, (20 + chunk + 8 if len(header) == 8 and header[4:] == b"BIN\x00" else -1)
