@@ -2,7 +2,9 @@
 
 Every user-fixable problem surfaces as :class:`~markerplace.errors.UserError`: printed as one
 line ``markerplace: error: ...`` with exit code 2; so does every argument error
-(:class:`OneLineParser`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
+(:class:`OneLineParser`), and what the machine makes fail (standard output on a full device or
+in an encoding that lacks a character, a deleted working directory, ``ulimit -n``, out of memory:
+:mod:`markerplace.cli.edge`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
 / 143 and one line saying how to resume (:mod:`markerplace.runtime.interrupt`).
 """
 
