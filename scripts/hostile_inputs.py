@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Re-run the bad inputs of issues 13 and 35 as a new user would, through the real command line.
+"""Re-run the bad inputs of issues 13, 35 and 50 as a new user would, through the real command line.
 
 Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged on how it ends:
 
@@ -14,15 +14,17 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
 
 Any traceback, any other exit code, a missing message, a run over its time limit or a failed
 output check is reported. Prints one line per case and a summary; writes ``hostile_inputs.md``
-into the work folder. Takes about 5 minutes on 2 cores. Usage::
+into the work folder. Takes about 8 minutes on 2 cores. Usage::
 
-    .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING]
+    .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING] [--group NAME]
 
 Groups of cases: :func:`cases` (files, numbers, output paths, ``--existing``, damaged caches),
 :func:`checked_input_cases` (tag ids, poses, JSON depth, cluster addresses with silent and
 garbage servers on 127.0.0.1, ``-k`` against the candidates, argument errors, the minor list),
-:func:`interrupt_cases` (Ctrl-C and SIGTERM at each stage) and :func:`folder_cases` (run folders
-and concurrency: the place for issue 35's items 1-3).
+:func:`interrupt_cases` (Ctrl-C and SIGTERM at each stage), :func:`folder_cases` (run folders
+and concurrency: the place for issue 35's items 1-3) and :func:`issue50_cases` (files that are not
+what their names say, stdout, encodings, resource limits, odd bookkeeping files, refusals before
+any work, a plan folder's files checked against each other).
 """
 
 from __future__ import annotations
@@ -200,7 +202,27 @@ def make_fixtures(w: Path) -> dict:
     lat = w / "latin1_mtl"
     lat.mkdir(exist_ok=True)
     f["latin1_mtl"] = latin1_room(lat)
+    issue50_fixtures(w, f)
     return f
+
+
+def issue50_fixtures(w: Path, f: dict) -> None:
+    """Issue 50's hostile files, all cheap (2 GiB of zeros as sparse files); the costly ones are
+    made by their case's ``setup`` (:func:`issue50_cases`)."""
+    for ext in (".ply", ".obj", ".glb", ".gltf"):
+        f[f"zeros{ext}"] = w / f"zeros{ext}"
+        with open(f[f"zeros{ext}"], "wb") as fh:
+            fh.truncate(2 << 30)
+    claims = w / "claims.ply"
+    claims.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 100000000\nproperty float x\n"
+                       b"property float y\nproperty float z\nend_header\n" + bytes(1000))
+    f["claims"] = claims
+    for name in ("fifo.ply", "fifo.json"):
+        if not os.path.lexists(w / name):
+            os.mkfifo(w / name)
+    if not os.path.lexists(w / "loop.glb"):
+        (w / "loop.glb").symlink_to("loop.glb")
+    (w / "deep.toml").write_text("a = " + "[" * 3000 + "]" * 3000 + "\n")
 
 
 def damage(path: Path, how: str) -> Callable[[], None]:
@@ -475,10 +497,148 @@ def folder_cases(w: Path, f: dict) -> list[Case]:
     ]
 
 
+def copy_base(w: Path, f: dict, name: str, change: Callable[[Path], None] | None = None) -> Callable[[], None]:
+    """A setup: ``out/name`` a fresh copy of the base plan, then ``change(copy)``."""
+    def run():
+        dst = w / "out" / name
+        if dst.exists():
+            shutil.rmtree(dst)
+        shutil.copytree(f["base"], dst)
+        if change is not None:
+            change(dst)
+    return run
+
+
+def edit_json(name: str, change: Callable[[dict], None]) -> Callable[[Path], None]:
+    def run(folder: Path):
+        doc = json.loads((folder / name).read_text())
+        change(doc)
+        (folder / name).write_text(json.dumps(doc))  # Python writes NaN as the bare token NaN
+    return run
+
+
+def foreign_folder(w: Path, name: str, entry: str) -> Callable[[], None]:
+    def run():
+        d = w / "out" / name
+        d.mkdir(parents=True, exist_ok=True)
+        (d / entry).write_text("the user's own")
+    return run
+
+
+def big_texture(w: Path) -> Callable[[], None]:
+    """A room whose texture is a 20000 x 20000 JPEG (about 1.2 GB of RGB while it is made)."""
+    def run():
+        from PIL import Image
+
+        d = w / "texture"
+        d.mkdir(exist_ok=True)
+        if not (d / "big.jpg").exists():
+            Image.linear_gradient("L").resize((20000, 20000)).convert("RGB").save(d / "big.jpg", quality=80)
+        gltf_with_texture_uri(d / "room.gltf", "big.jpg")
+    return run
+
+
+def unchanged(path: Path, text: str) -> Callable[[], str | None]:
+    return lambda: None if path.read_text() == text else f"{path} was overwritten"
+
+
+def quiet_stderr() -> Callable[[], str | None]:
+    return lambda: None if not LAST_STDERR[0].strip() else f"--quiet still printed: {LAST_STDERR[0].strip()[:120]}"
+
+
+def issue50_cases(w: Path, f: dict) -> list[Case]:
+    """Issue 50, items 3-6: files that are not what their names say, tracebacks at the edges
+    (stdout, encodings, resource limits, a deleted working directory, odd bookkeeping files),
+    refusals that came only at the end, and a plan folder's files checked against each other."""
+    o = lambda name: str(w / "out" / name)  # noqa: E731
+    plan = lambda scene, name, *extra: ["plan", str(scene), "-k", "2", "--out", o(name), *FAST, *extra]  # noqa: E731
+    quick = {"max_seconds": 10}
+    base, lock = f["base"], ".markerplace-run.lock"
+    target = w / "precious.txt"
+    c = [Case(f"2 GiB of zeros named x{ext}", plan(f[f"zeros{ext}"], f"z{ext[1:]}"), "error", "is not a valid",
+              extra=quick) for ext in (".ply", ".obj", ".glb", ".gltf")]
+    c += [
+        Case("PLY claiming 1e8 vertices in 1 kB", plan(f["claims"], "z5"), "error", "which need at least", extra=quick),
+        Case("a FIFO as the mesh", plan(w / "fifo.ply", "z6"), "error", "is a named pipe (FIFO)", extra=quick),
+        Case("/dev/zero as the mesh", plan("/dev/zero", "z7"), "error", "is a device", extra=quick),
+        Case("a symlink loop as the mesh", plan(w / "loop.glb", "z8"), "error", "symbolic link loop", extra=quick),
+        Case("a FIFO as --existing", plan("tiny", "z9", "--existing", str(w / "fifo.json")), "error",
+             "is a named pipe (FIFO)", extra=quick),
+        Case("a 20000 x 20000 texture", ["render", str(w / "texture" / "room.gltf"), "--out", o("z10/v")], "warn",
+             "downscaled to 10000 x 10000", setup=big_texture(w)),
+        Case("TOML config nested 3000 deep", plan("tiny", "t1", "--config", str(w / "deep.toml")), "error",
+             "nests arrays/tables too deeply", extra=quick),
+        Case("a folder named like the lock file", plan("tiny", "t2"), "error", "where markerplace keeps its lock file",
+             setup=copy_base(w, f, "t2", lambda d: (d / lock).mkdir()), extra=quick),
+        Case("a hard link named like the lock file", plan("tiny", "t3"), "error", "is a hard link",
+             setup=copy_base(w, f, "t3", lambda d: (target.write_text("precious"), os.link(target, d / lock))),
+             check=unchanged(target, "precious"), extra=quick),
+        Case("non-ASCII --out on an ASCII stdout", ["render", "tiny", "--out", o("été/vue")], "ok",
+             extra={"run": {"env": {**os.environ, "PYTHONIOENCODING": "ascii"}}}),
+        Case("stdout on a full device", ["scene", "list"], "error", "cannot write to standard output",
+             extra={"run": {"stdout": "/dev/full"}}),
+        Case("ulimit -n 16 with --workers 2", ["plan", "tiny", "-k", "2", "--out", o("t6"), "--grid-spacing", "1.0",
+                                               "--yaws", "2", "--workers", "2", "--quiet"], "error",
+             "too many open files", extra={"run": {"rlimit": ("RLIMIT_NOFILE", 16)}}),
+        Case("ulimit -v 1500000", plan("tiny", "t7"), "error", "out of memory",
+             extra={"run": {"rlimit": ("RLIMIT_AS", 1_500_000 * 1024)}, "native_noise": "OpenBLAS"}),
+        Case("a deleted working directory", plan("tiny", "t8"), "error", "working directory cannot be read",
+             extra={"run": {"gone_cwd": True}}),
+    ]
+    for entry in ("placement.json", "tags.pdf", "report.html", "config.json", "scores.npz"):
+        name = f"a{len(c)}"
+        c.append(Case(f"--adopt a folder holding a foreign {entry}", plan("tiny", name, "--adopt"), "error",
+                      f"{entry} is not written by markerplace", setup=foreign_folder(w, name, entry), extra=quick))
+    nan_position = edit_json("placement.json", lambda d: d["markers"][0]["position"].__setitem__(0, float("nan")))
+    room = edit_json("config.json", lambda d: d.__setitem__("scene", "room"))
+    readers = {"export": lambda d: ["export", o(d), "--gltf", o(f"{d}.glb")],
+               "check": lambda d: ["check", o(d), "--installed", str(base / "placement.json"), "--out", o(f"{d}_c")],
+               "evaluate --plan": lambda d: ["evaluate", "--plan", o(d), "--out", o(f"{d}_e"), "--quiet"]}
+    for i, (what, argv) in enumerate(readers.items()):
+        c.append(Case(f"{what} of a placement.json with a NaN", argv(f"n{i}"), "error", "NaN or infinite",
+                      setup=copy_base(w, f, f"n{i}", nan_position), extra=quick))
+        c.append(Case(f"{what} after config.json's scene was edited", argv(f"s{i}"), "error",
+                      "does not match the scene of its config.json", setup=copy_base(w, f, f"s{i}", room),
+                      extra={"max_seconds": 30}))
+    c += [
+        Case("print-volume advice under --quiet", plan("tiny", "q1"), "ok", check=quiet_stderr()),
+        Case("check --out PLAN_DIR", ["check", str(base), "--installed", str(base / "placement.json"), "--out",
+                                      str(base)], "error", "is the plan folder itself", extra=quick),
+        Case("evaluate tiny --plan DIR", ["evaluate", "tiny", "--plan", str(base), "--out", o("e50"), "--quiet"],
+             "error", "is already the scene of the plan", extra=quick),
+    ]
+    return c
+
+
+def run_cli(argv: list[str], w: Path, run: dict) -> tuple[int, str, float]:
+    """Run the CLI as :func:`cli` does, with a case's ``extra["run"]``: ``env``, ``stdout`` (a
+    path to write it to), ``rlimit`` ((name, value) set in the child) or ``gone_cwd`` (started
+    in a folder deleted under it)."""
+    import resource
+
+    cmd, cwd = [sys.executable, "-m", "markerplace.cli", *argv], w
+    if run.get("gone_cwd"):
+        gone = w / "gone"
+        gone.mkdir(exist_ok=True)
+        cmd = ["sh", "-c", f"cd '{gone}' && rmdir '{gone}' && exec \"$0\" \"$@\"", *cmd]
+    limit = run.get("rlimit")
+    pre = (lambda: resource.setrlimit(getattr(resource, limit[0]), (limit[1], limit[1]))) if limit else None
+    stdout = open(run["stdout"], "w") if run.get("stdout") else None
+    t0 = time.perf_counter()
+    try:
+        res = subprocess.run(cmd, stdout=stdout or subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                             env=run.get("env"), preexec_fn=pre, timeout=600)
+    finally:
+        if stdout is not None:
+            stdout.close()
+    return res.returncode, res.stderr, time.perf_counter() - t0
+
+
 def judge(case: Case, code: int, err: str, seconds: float) -> str | None:
     if "Traceback" in err:
         return "traceback"
-    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    noise = case.extra.get("native_noise")  # a native library's own lines (OpenBLAS under ulimit -v)
+    lines = [ln for ln in err.strip().splitlines() if ln.strip() and not (noise and ln.startswith(noise))]
     if case.expect == "error":
         if code != 2:
             return f"exit {code}, expected 2"
@@ -498,10 +658,16 @@ def judge(case: Case, code: int, err: str, seconds: float) -> str | None:
     return None
 
 
+GROUPS = {"files": cases, "checked": checked_input_cases, "interrupts": interrupt_cases, "folders": folder_cases,
+          "issue50": issue50_cases}
+"""The groups of cases, in the order they run (``--group`` picks one)."""
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", default="out/hostile_inputs", help="scratch folder (emptied first)")
     ap.add_argument("--only", default=None, help="run the cases whose name contains this")
+    ap.add_argument("--group", default=None, choices=sorted(GROUPS), help="run one group of cases")
     args = ap.parse_args()
     w = Path(args.workdir).resolve()
     if w.exists():
@@ -515,7 +681,7 @@ def main() -> int:
     servers = [LoopbackServer(garbage=False), LoopbackServer(garbage=True)]
     f["silent"], f["garbage"] = servers[0].address, servers[1].address
     rows, bad = [], 0
-    every = [*cases(w, f), *checked_input_cases(w, f), *interrupt_cases(w, f), *folder_cases(w, f)]
+    every = [case for name, group in GROUPS.items() if args.group in (None, name) for case in group(w, f)]
     for case in every:
         if args.only and args.only not in case.name:
             continue
@@ -552,6 +718,8 @@ def main() -> int:
             res = subprocess.run([*prefix, sys.executable, "-m", "markerplace.cli", *argv], capture_output=True,
                                  text=True, cwd=w, timeout=600)
             code, err, seconds = res.returncode, res.stderr, 0.0
+        elif case.extra.get("run"):
+            code, err, seconds = run_cli(argv, w, case.extra["run"])
         else:
             code, _, err, seconds = cli(argv, w)
         LAST_STDERR[0] = err

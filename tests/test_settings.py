@@ -122,6 +122,9 @@ def test_toml_sets_nested_fields_and_flags_override(tmp_path):
     ("[discretize.candidates]\nallow = [\"roofs\"]\n", "discretize.candidates.allow: --allow 'roofs': unknown 'roofs'"),
     ("discretize = 3\n", "discretize is a table of settings"),
     ("[discretize\n", "is not valid TOML"),
+    ("a = " + "[" * 3000 + "]" * 3000 + "\n", "nests arrays/tables too deeply"),  # issue 50: RecursionError
+    ("a = " + "{b = " * 3000 + "1" + "}" * 3000 + "\n", "nests arrays/tables too deeply"),
+    ("[placement]\nk = " + "[" * 40 + "1" + "]" * 40 + "\n", "more than 32 deep"),
 ])
 def test_config_file_errors_are_one_line(tmp_path, capsys, text, needle):
     f = tmp_path / "bad.toml"

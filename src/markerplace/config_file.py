@@ -36,7 +36,7 @@ from typing import Any
 
 from markerplace.errors import UserError
 from markerplace.settings import NO_CONST, Leaf, apply, walk
-from markerplace.jsonfile import read_json
+from markerplace.jsonfile import MAX_JSON_DEPTH, read_json
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +82,11 @@ def read_config_file(path: str | Path, base: Any) -> Any:
             raise UserError(f"{what} is not valid TOML ({' '.join(str(err).split())}): fix the file") from None
         except OSError as err:
             raise UserError(f"{what}: cannot read it ({err.strerror or err})") from None
+        except RecursionError:  # tomllib recurses once per nested array or inline table
+            raise UserError(f"{what} nests arrays/tables too deeply (Python's parser gave up): not a settings file; "
+                            "fix it") from None
+        if _depth(data) > MAX_JSON_DEPTH:
+            raise UserError(f"{what} nests arrays/tables more than {MAX_JSON_DEPTH} deep: not a settings file; fix it")
     elif path.suffix.lower() == ".json":
         data = read_json(path, what)
         if not isinstance(data, dict):
@@ -96,6 +101,17 @@ def read_config_file(path: str | Path, base: Any) -> Any:
     updates: dict[str, Any] = {}
     _collect(data, base, "", updates, what)
     return apply(base, updates)
+
+
+def _depth(value: Any) -> int:
+    """Deepest nesting of lists and dicts in ``value`` (0 for a scalar), without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, (list, dict)):
+            deepest = max(deepest, d + 1)
+            stack.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def _collect(data: dict, config: Any, prefix: str, updates: dict, what: str) -> None:

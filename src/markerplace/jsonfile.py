@@ -5,14 +5,17 @@
 Every problem is a :class:`~markerplace.errors.UserError` with one line naming the file and the
 option: missing, a folder, larger than ``max_bytes``, not UTF-8, nested deeper than
 ``max_depth`` (checked on the text before parsing, so ``[`` x 100000 gives one line instead of
-Python's ``RecursionError``) or not valid JSON (with line and column). JSON's ``NaN`` and
-``Infinity`` constants are accepted here (placement.json holds ``NaN`` gains); the callers
-check that poses and sizes are finite.
+Python's ``RecursionError``), not valid JSON (with line and column), or holding a number that
+is not finite: Python's ``NaN``, ``Infinity`` and ``-Infinity`` (no JSON, but Python writes
+them) and numbers beyond a float (``1e400``) are refused wherever they are, so a plan folder
+whose placement.json was edited to hold one is refused by every reader (the tool itself writes
+``null`` for a value that is not a number, :func:`markerplace.runtime.atomic_io.write_json`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -20,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.input_checks import check_input_file
 
 __all__ = ["read_json", "json_depth", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
 
@@ -41,6 +45,23 @@ def json_depth(data: bytes) -> int:
     return int(np.cumsum(step).max()) if len(step) else 0
 
 
+def _non_finite(what: str):
+    def refuse(token: str):
+        raise UserError(f"{what} holds {token}, a NaN or infinite number, which JSON does not have: every number "
+                        "must be finite; fix or re-export it")
+    return refuse
+
+
+def _finite(what: str):
+    def number(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):  # 1e400
+            raise UserError(f"{what} holds {text[:40]}, a NaN or infinite number (too large for a float): every "
+                            "number must be finite; fix or re-export it")
+        return value
+    return number
+
+
 def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JSON_BYTES,
               max_depth: int = MAX_JSON_DEPTH) -> Any:
     """Parse the JSON file ``path`` under the guards of the module docstring.
@@ -57,10 +78,7 @@ def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JS
     """
     path = Path(path)
     what = what or str(path)
-    if path.is_dir():
-        raise UserError(f"{what} is a folder, not a JSON file")
-    if not path.is_file():
-        raise UserError(f"{what}: no such file")
+    check_input_file(path, what, "a JSON file")  # a folder, a FIFO, a device, a link loop: one line each
     try:
         size = path.stat().st_size
         if size > max_bytes:
@@ -79,7 +97,7 @@ def read_json(path: str | Path, what: str | None = None, max_bytes: int = MAX_JS
         raise UserError(f"{what} nests arrays/objects {depth} deep, more than {max_depth}: not a file this tool "
                         "writes or reads; fix or re-export it")
     try:
-        return json.loads(text)
+        return json.loads(text, parse_constant=_non_finite(what), parse_float=_finite(what))
     except json.JSONDecodeError as err:
         raise UserError(f"{what} is not valid JSON ({err.msg} at line {err.lineno}, column {err.colno}); "
                         "fix or re-export it") from None

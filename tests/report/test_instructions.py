@@ -219,6 +219,10 @@ def test_sheets_are_said_before_writing_and_a_warning_offers_alternatives(tmp_pa
     with caplog.at_level(logging.INFO, logger="markerplace.report.pdf"):
         assert write_tags_pdf(tmp_path / "t.pdf", recs[:2], "a4") == 26
     assert "26 sheet(s) in all" in caplog.text and "fewer sheets" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="markerplace"):  # --quiet: advice, not a warning (issue 50)
+        write_tags_pdf(tmp_path / "t.pdf", recs[:2], "a4")
+    assert "fewer sheets" not in caplog.text
 
 
 def floats_in(obj):

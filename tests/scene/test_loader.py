@@ -164,7 +164,7 @@ def test_corrupt_file(tmp_path):
     path = tmp_path / "broken.glb"
     path.write_bytes(b"glTF\x02\x00\x00\x00garbage" + bytes(range(50)))
     msg = _error(tmp_path, str(path))
-    assert msg.startswith("could not read") and "valid binary glTF" in msg
+    assert "valid binary glTF" in msg  # refused by its header (scene.preflight) before trimesh reads it
 
 
 @pytest.mark.parametrize(

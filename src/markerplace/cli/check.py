@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from markerplace.pipelines.check import run_check
-from markerplace.cli.options import add_adopt_arg
+from markerplace.cli.options import add_adopt_arg, add_force_arg
 from markerplace.plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
 
 
@@ -36,6 +36,7 @@ def add_check_parser(sub) -> argparse.ArgumentParser:
                         f"(default {MATCH_RADIUS_M:g})")
     p.add_argument("--workers", type=int, default=1, help="processes for the depth renders (default 1: this process)")
 
+    add_force_arg(p)
     add_adopt_arg(p)  # PLAN_DIR from an older markerplace, or an --out folder it did not make
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
     p.set_defaults(func=cmd_check)

@@ -8,6 +8,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from markerplace.cli.options import add_force_arg
 from markerplace.errors import UserError
 from markerplace.output_checks import check_output_file
 from markerplace.plan.folder import read_plan_folder
@@ -36,5 +37,6 @@ def add_export_parser(sub) -> argparse.ArgumentParser:
                     "the z-up world, metres); a root node maps it to glTF's y-up metres so viewers show it upright.")
     p.add_argument("plan_dir", metavar="PLAN_DIR", help="the --out folder of a `markerplace plan` run")
     p.add_argument("--gltf", required=True, metavar="OUT.glb", help="output file (.glb)")
+    add_force_arg(p)
     p.set_defaults(func=cmd_export)
     return p

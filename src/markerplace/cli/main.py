@@ -2,7 +2,9 @@
 
 Every user-fixable problem surfaces as :class:`~markerplace.errors.UserError`: printed as one
 line ``markerplace: error: ...`` with exit code 2; so does every argument error
-(:class:`OneLineParser`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
+(:class:`OneLineParser`), and what the machine makes fail (standard output on a full device or
+in an encoding that lacks a character, a deleted working directory, ``ulimit -n``, out of memory:
+:mod:`markerplace.cli.edge`). Ctrl-C and SIGTERM stop the command within seconds with exit code 130
 / 143 and one line saying how to resume (:mod:`markerplace.runtime.interrupt`).
 """
 
@@ -18,10 +20,11 @@ from markerplace.errors import UserError
 from markerplace.log import setup_logging
 from markerplace.pipelines.plan import PlanInputs, run_plan
 from markerplace.scene.spec import SceneSpec
-from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_from_args
+from markerplace.cli.options import add_force_arg, add_plan_args, add_scene_args, plan_config_from_args
 from markerplace.cli.plan_frames import add_frames_args, cmd_plan_frames
 import numpy as np
 from markerplace.cli.bounds import check_args
+from markerplace.cli.edge import StdoutError, StdoutGuard, check_working_directory, resource_error
 from markerplace.cli.check import add_check_parser
 from markerplace.cli.evaluate import add_evaluate_parser
 from markerplace.cli.export import add_export_parser
@@ -38,6 +41,7 @@ from markerplace.runtime import cache_home
 from markerplace.runtime.interrupt import InterruptGuard
 from markerplace.runtime.run_folder import close_all
 from markerplace.scene import load_scene
+from markerplace.scene.preflight import allow_large_models
 from markerplace.scene.builtin.catalogue import list_scenes
 from markerplace.scene.export import export_glb
 from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
@@ -142,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.add_argument("name", help="built-in scene name")
     p_export.add_argument("out", help="output path, e.g. office.glb")
     p_export.add_argument("--seed", type=int, default=0, help="seed of the procedural generator (default 0)")
+    add_force_arg(p_export)
     p_export.set_defaults(func=cmd_scene_export)
 
     p_render = sub.add_parser("render", help="render RGB, depth and normals of a scene at one camera pose")
@@ -152,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--width", type=int, default=600, help="image width in pixels (default 600)")
     p_render.add_argument("--height", type=int, default=450, help="image height in pixels (default 450)")
     p_render.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    add_force_arg(p_render)
     p_render.set_defaults(func=cmd_render)
 
 
@@ -226,32 +232,53 @@ RESUMABLE_COMMANDS = ("plan", "evaluate", "study", "check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    with InterruptGuard() as guard:
+    with InterruptGuard() as guard, StdoutGuard() as stdout:
         try:
-            parser = build_parser()
-            args = parser.parse_args(join_signed_values(list(sys.argv[1:] if argv is None else argv)))
-            setup_logging(quiet=args.quiet, verbose=args.verbose)
-            for note in cache_home.NOTE:  # the cache folder is not the one asked for (a service account)
-                (log.warning if cache_home.NOTE_IS_WARNING else log.info)("cache: %s", note)
-            guard.resumable = args.command in RESUMABLE_COMMANDS
-            func = getattr(args, "func", None)
-            if func is None:
-                # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
-                if args.command == "scene":
-                    parser.parse_args(["scene", "--help"])
-                parser.print_help()
-                return 2
-
-            check_args(args)  # every numeric option of every subcommand: finite and in range
             try:
-                code = int(func(args) or 0)
-                if guard.signum is not None:  # a signal whose exception was swallowed on the way
-                    return guard.stopped(KeyboardInterrupt())
-                return code
+                check_working_directory()
+                code = _run(list(sys.argv[1:] if argv is None else argv), guard)
             finally:
-                close_all()  # unlock the run folders; one the run wrote nothing into is left as found
+                sys.stdout.flush()  # a full disk shows here, not in Python's flush at exit
+            return code
+        except StdoutError as err:
+            stdout.silence()
+            if not err.quiet:
+                print(f"markerplace: error: {err}", file=sys.stderr)
+            return err.exit_code
         except UserError as err:
             print(f"markerplace: error: {err}", file=sys.stderr)
             return err.exit_code
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (runtime.interrupt.Terminated)
             return guard.stopped(err)
+        except (MemoryError, OSError, ImportError) as err:  # ulimit -n, ulimit -v, no memory: one line (cli.edge)
+            short = resource_error(err, guard.resumable)
+            if short is None:
+                raise
+            print(f"markerplace: error: {short}", file=sys.stderr)
+            return short.exit_code
+
+
+def _run(argv: list[str], guard: InterruptGuard) -> int:
+    """Parse ``argv`` and run its command (:func:`main` catches what it raises)."""
+    parser = build_parser()
+    args = parser.parse_args(join_signed_values(argv))
+    setup_logging(quiet=args.quiet, verbose=args.verbose)
+    for note in cache_home.NOTE:  # the cache folder is not the one asked for (a service account)
+        (log.warning if cache_home.NOTE_IS_WARNING else log.info)("cache: %s", note)
+    guard.resumable = args.command in RESUMABLE_COMMANDS
+    func = getattr(args, "func", None)
+    if func is None:
+        # `markerplace` or `markerplace scene` without a subcommand: show the relevant help.
+        if args.command == "scene":
+            parser.parse_args(["scene", "--help"])
+        parser.print_help()
+        return 2
+    check_args(args)  # every numeric option of every subcommand: finite and in range
+    allow_large_models(getattr(args, "force", False))  # --force: a model file larger than the free memory too
+    try:
+        code = int(func(args) or 0)
+        if guard.signum is not None:  # a signal whose exception was swallowed on the way
+            return guard.stopped(KeyboardInterrupt())
+        return code
+    finally:
+        close_all()  # unlock the run folders; one the run wrote nothing into is left as found

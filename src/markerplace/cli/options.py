@@ -25,7 +25,7 @@ from markerplace.settings import add_setting_args, apply, values_from_args
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "parse_allow", "parse_level", "parse_xy",
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow", "parse_level", "parse_xy",
            "plan_config_from_args", "plan_config_for_budgets"]
 
 
@@ -93,9 +93,17 @@ def add_plan_args(p: argparse.ArgumentParser, command: str = "plan") -> None:
     add_setting_args(p, PlanConfig(), command, {"discretize": disc, "placement": placing, "runtime": placing})
     placing.add_argument("--force", action="store_true",
                          help="run even when the size guard estimates more poses, memory or time than the limits "
-                              "(200,000 poses, 80%% of this machine's memory, 12 h)")
+                              "(200,000 poses, 80%% of this machine's memory, 12 h), or loading the model file more "
+                              "memory than is free")
     add_adopt_arg(p)
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars, warnings only")
+
+
+def add_force_arg(p: argparse.ArgumentParser) -> None:
+    """``--force`` of the commands without a size guard that load a model (``render``, ``scene
+    export``, ``export``, ``check``): :func:`markerplace.scene.preflight.check_memory`."""
+    p.add_argument("--force", action="store_true",
+                   help="load the model file even when it is estimated to need more memory than is free")
 
 
 def add_adopt_arg(p: argparse.ArgumentParser) -> None:

@@ -55,8 +55,8 @@ RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {
                                    "the map"),
              **_COMMON_RUN_OPTIONS},
     "evaluate": {**_SCENE_RUN_OPTIONS,
-                 "scene": ("required unless `--plan`", "a built-in scene name or a mesh file; with `--plan` left out "
-                                                       "(or the plan's own)"),
+                 "scene": ("required unless `--plan`", "a built-in scene name or a mesh file; left out with `--plan` "
+                                                       "(which brings its own)"),
                  "--seed": ("0", "seeds the scene generator of built-ins, the localizer's RANSAC, the VLAD codebook, "
                                  "the held-out ceiling's splits and (unless `--test-seed`) the test poses; with "
                                  "`--plan` the plan's"),

@@ -6,6 +6,7 @@ on the walls, compared with the plan (:mod:`markerplace.plan.check`), and what i
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 
@@ -15,13 +16,18 @@ from markerplace.pipelines.plan import prepare
 from markerplace.plan import check
 from markerplace.plan.folder import read_plan_folder
 from markerplace.report.check_report import write_check_outputs
+from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
+from markerplace.runtime.claims import refuse_foreign
 from markerplace.runtime.executor import RuntimeConfig, make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_installed", "run_check"]
+__all__ = ["load_installed", "run_check", "CHECK_OUTPUTS"]
+
+CHECK_OUTPUTS = ("check.json", "check.csv", "check_map.png", *tag_map_patterns())
+"""What ``check`` writes into its ``--out`` folder (see :data:`markerplace.pipelines.plan.PLAN_OUTPUTS`)."""
 
 
 def load_installed(path: str | Path, default_size: float) -> list:
@@ -52,10 +58,15 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     folder = read_plan_folder(plan_dir)
     installed_user = load_installed(installed_path, folder.config.placement.tag_size)
     out = Path(out_dir) if out_dir is not None else folder.path / "check"
+    if os.path.realpath(out) == os.path.realpath(folder.path):
+        raise UserError(f"--out {out} is the plan folder itself: check writes its own tagmaps/ (the tags as "
+                        "installed) and would replace the plan's; give another folder (default PLAN_DIR/check)")
     run_folder.open_run_folder(folder.path, "check", adopt=adopt, option="PLAN_DIR")  # its caches may be rewritten
     run_folder.open_run_folder(out, "check", adopt=adopt)
+    refuse_foreign(out, CHECK_OUTPUTS)  # before any work
     spec = folder.spec
     scene = spec.load()
+    folder.check_scene(scene)  # placement.json on config.json's scene, before anything renders
     offset = world_offset(scene)
     config = folder.config_in_scene_frame(offset)
     installed = markers_to_internal(installed_user, offset)

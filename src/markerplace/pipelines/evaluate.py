@@ -214,6 +214,8 @@ def evaluate(scene_spec, plan_config, config, out: str | Path, placements_dir: s
         load_markers(path, "--placements")
     if plan is not None and Path(out).resolve() == plan.path.resolve():
         raise UserError(f"--out {out} is the --plan folder: give the evaluation its own folder (the plan's is only read)")
+    if plan is not None:
+        plan.check_scene(scene_spec.load())  # its placement on its scene's candidates, before anything is written
     run_config = open_evaluation_folder("evaluate", out, scene_spec, plan_config, config, inputs, len(placement_files))
     return run_evaluation(scene_spec, run_config, config, out, placements_dir=placements_dir, progress=inputs.progress,
                           plan=plan, where=where)

@@ -75,8 +75,10 @@ def _differs(given, planned) -> bool:
 def _check_scene(folder: PlanFolder, scene: str | None, up, unit_scale, seed) -> None:
     where = f"the plan in {folder.path}"
     spec = folder.spec
-    if scene is not None and scene != spec.spec and Path(scene).resolve() != Path(spec.spec).resolve():
-        raise UserError(f"scene {scene!r} is not the scene of {where} ({spec.spec!r}): leave it out with --plan")
+    if scene is not None:  # its own or another: the plan gives the scene, one source only
+        same = scene == spec.spec or Path(scene).resolve() == Path(spec.spec).resolve()
+        raise UserError(f"scene {scene!r} {'is already' if same else 'is not'} the scene of {where} ({spec.spec!r}): "
+                        "give a scene or --plan, not both (--plan brings its scene)")
     for flag, given, planned in (("--up", up, spec.up), ("--unit-scale", unit_scale, spec.unit_scale),
                                  ("--seed", seed, spec.seed)):
         if given is not None and _differs(given, planned):

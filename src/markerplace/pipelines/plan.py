@@ -39,7 +39,9 @@ from markerplace.plan.types import PlanData
 from markerplace.plan.where import Where, disc_pose_weights, load_where
 from markerplace.report.plan_outputs import write_plan_outputs
 from markerplace.report.plan_report import write_plan_report
+from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
+from markerplace.runtime.claims import refuse_foreign
 from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
@@ -49,7 +51,14 @@ from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_c
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan"]
+__all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan", "PLAN_OUTPUTS"]
+
+PLAN_OUTPUTS = ("discretization.npz", "discretization.npz.meta.json", "observations/*.npy", "observations.meta.json",
+                "similarity.npz", "similarity.npz.meta.json", "calibration/", "success_model_*.json*",
+                "placement.json", "placement.csv", "tags/*_tag*.svg", "tags.pdf", "scores.npz", "config.json",
+                "scores.png", "gain_first.png", "placement.png", "where.png", "report.html", *tag_map_patterns())
+"""What ``plan`` writes into its folder (``fnmatch`` patterns; ``/``: a folder), checked in an
+adopted folder before any work (:func:`markerplace.runtime.claims.refuse_foreign`)."""
 
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, existing: Sequence[Marker] = (),
@@ -161,6 +170,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     where = load_where(inputs.where) if inputs.where else None
     previous = previous_markers(out, scene_spec.spec)  # to say what this run changes
     run_folder.open_run_folder(out, "plan", adopt=inputs.adopt)
+    refuse_foreign(out, PLAN_OUTPUTS)  # a file of the user's named like an output: refused now, not at the end
     if config.runtime.cluster:
         check_scheduler(config.runtime.cluster)  # something answers there, before any work
     scene = scene_spec.load()

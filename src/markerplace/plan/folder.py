@@ -16,12 +16,17 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.markers import Marker, marker_from_json
+from markerplace.markers import Marker, check_markers_on_walls, marker_from_json
 from markerplace.scene.spec import SceneSpec
 from markerplace.config_file import upgrade_legacy
 from markerplace.jsonfile import read_json
 from markerplace.plan.config import PlanConfig
-from markerplace.scene.worldframe import markers_to_internal, points_to_internal
+from markerplace.plan.discretize.artifact import load as load_discretization
+from markerplace.plan.discretize.stage import discretize_key
+from markerplace.runtime import cache
+from markerplace.runtime import run_folder
+from markerplace.runtime.run_lock import lock_for_reading
+from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
 
 log = logging.getLogger(__name__)
 
@@ -114,9 +119,40 @@ class PlanFolder:
         indices = [int(r.get("candidate_index", -1)) for r in self.records]
         for m, c in zip(internal, indices):
             if not 0 <= c < len(cands) or np.abs(cands[c] - m.world_from_marker).max() > 1e-4:
-                raise UserError(f"{self.path}: placement.json does not match the folder's cached stages (tag "
-                                f"{m.tag_id}); re-run `markerplace plan` into it")
+                raise UserError(f"{self.path}: placement.json does not match the scene and settings of its "
+                                f"config.json (tag {m.tag_id} is not on its candidate spot): one of them was edited "
+                                "or comes from another run; re-run `markerplace plan` into the folder")
         return [Marker(m.tag_id, m.size, cands[c].copy(), m.family) for m, c in zip(internal, indices)], indices
+
+
+    def check_scene(self, scene) -> None:
+        """Refuse (one line) a folder whose placed tags do not belong to its config.json's scene
+        and settings (``scene``, loaded from :attr:`spec`): config.json or placement.json edited,
+        or from two runs. With the folder's cached discretization fresh for them, each tag must
+        sit on one of its candidate spots; without (deleted, or made by another version or for
+        another model file) each must hang on a wall of the scene
+        (:func:`markerplace.markers.check_markers_on_walls`). ``export``, ``check`` and ``evaluate
+        --plan`` call it before anything is written; the latter two then also check each tag's
+        ``candidate_index`` on the stages they reuse (:meth:`planned_on_candidates`)."""
+        offset = world_offset(scene)
+        config = self.config_in_scene_frame(offset)
+        key = discretize_key(scene, config.discretize, config.placement.tag_size)
+        disc = cache.load_fresh(self.path / "discretization.npz", key, load_discretization)
+        markers = markers_to_internal(self.markers, offset)
+        if disc is None:
+            try:
+                check_markers_on_walls(scene, markers, "placement.json")
+            except UserError as err:
+                raise UserError(f"{self.path}: placement.json does not match the scene of its config.json ({err}): "
+                                "one of them was edited or comes from another run; re-run `markerplace plan` into "
+                                "the folder") from None
+            return
+        cands = np.asarray(disc.candidate_world_from_marker, float)  # all of them: candidate_index counts the seen
+        for m in markers:
+            if not len(cands) or np.abs(cands - m.world_from_marker).max(axis=(1, 2)).min() > 1e-4:
+                raise UserError(f"{self.path}: placement.json does not match the scene and settings of its "
+                                f"config.json (tag {m.tag_id} is on none of their candidate spots): one of them was "
+                                "edited or comes from another run; re-run `markerplace plan` into the folder")
 
 
 def _read_json(path: Path, what: str) -> dict:
@@ -130,11 +166,16 @@ def _read_json(path: Path, what: str) -> dict:
 
 
 def read_plan_folder(path: str | Path, option: str = "PLAN_DIR") -> PlanFolder:
-    """Read a plan folder. Raises :class:`UserError` (one line) for a missing folder, a folder
-    that is not a finished plan run, or damaged files."""
+    """Read a plan folder, holding a shared lock on it until the command ends
+    (:func:`markerplace.runtime.run_lock.lock_for_reading`; released by
+    :func:`markerplace.runtime.run_folder.close_all`). Raises :class:`UserError` (one line) for a
+    missing folder, one a run is writing, a folder that is not a finished plan run, or damaged
+    files (a number that is not finite included: :func:`markerplace.jsonfile.read_json`)."""
     path = Path(path)
     if not path.is_dir():
         raise UserError(f"{option} {str(path)!r} is not a folder: give the --out folder of a `markerplace plan` run")
+    if run_folder.find(path) is None and (path / run_folder.MARKER).is_file():  # not this process's own run
+        lock_for_reading(path / run_folder.LOCK, f"{option} {path}")  # shared: no plan rewrites it meanwhile
     missing = [n for n in ("config.json", "placement.json") if not (path / n).is_file()]
     if missing:
         raise UserError(f"{option} {str(path)!r} is not a plan folder: {' and '.join(missing)} missing "

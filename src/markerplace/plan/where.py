@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.input_checks import check_input_file
 from markerplace.jsonfile import read_json
 
 log = logging.getLogger(__name__)
@@ -227,8 +228,8 @@ def load_where(path: str | Path, option: str = "--where") -> Where:
     missing file or one that is not JSON (:func:`markerplace.jsonfile.read_json`)."""
     path = Path(path)
     source = f"{option} {path}"
-    if not path.is_file():
-        raise UserError(f"{source}: no such file; give a GeoJSON file of zones, routes and poses (docs/where.md)")
+    check_input_file(path, source, "a GeoJSON file of zones, routes and poses",
+                     "; give a GeoJSON file of zones, routes and poses (docs/where.md)")
     return parse_where(read_json(path, source), source)
 
 

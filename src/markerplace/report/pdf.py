@@ -23,7 +23,7 @@ Per tag, in placement order:
 Every page names its tag (placement order and id); a tile page also names its tile (row and
 column of rows x columns). :func:`markerplace.report.sheets.sheet_plan` says which pages hold which tag before anything is
 written (placement.csv lists them); :func:`write_tags_pdf` logs the sheets per tag and in all,
-and warns when a tag takes more than ``MAX_SHEETS_PER_TAG`` sheets, with what the alternatives
+and advises (an INFO line) when a tag takes more than ``MAX_SHEETS_PER_TAG`` sheets, with what the alternatives
 cost (:mod:`markerplace.report.sheets`, which also has the tiling geometry).
 """
 
@@ -212,7 +212,8 @@ def _tile_pages(pdf: _Pdf, rec: dict, lay: TileLayout) -> None:
 
 def write_tags_pdf(path: str | Path, records: Sequence[dict], paper: str = "a4") -> int:
     """Write ``tags.pdf`` for ``placement.json`` marker records (see module docstring), atomically;
-    log the sheets it takes first (and warn when a tag takes too many: :func:`sheet_advice`).
+    log the sheets it takes first (and advise when a tag takes too many: :func:`sheet_advice`; an
+    INFO line, so ``--quiet`` hides it).
 
     Args:
         path: output file.
@@ -229,8 +230,8 @@ def write_tags_pdf(path: str | Path, records: Sequence[dict], paper: str = "a4")
     if records:
         summary, warning = sheet_advice(records, paper)
         log.info("%s", summary)
-        if warning:
-            log.warning("%s", warning)
+        if warning:  # advice on the print volume, not a problem: --quiet hides it
+            log.info("%s", warning)
     with atomic_path(path) as tmp:
         pdf = _Pdf(tmp, "markerplace tags")
         for rec, t in zip(records, plan):

@@ -60,6 +60,7 @@ def export_plan_glb(folder, out: str | Path) -> dict:
     """Write the model of the plan ``folder`` (:class:`~markerplace.plan.folder.PlanFolder`) with
     its tags to ``out`` (binary glTF, atomically). Returns a summary (tags, faces, frames)."""
     scene = folder.spec.load()
+    folder.check_scene(scene)  # placement.json on the candidates of config.json's scene (as check and evaluate test)
     offset = world_offset(scene)
     R = world_from_file_rotation(folder.scene, folder.scene_options.get("up"))
     builtin = R is None

@@ -80,11 +80,14 @@ def clean_float(value: float, digits: int | None = JSON_DIGITS) -> float:
 
 def clean_numbers(obj: Any, digits: int | None = JSON_DIGITS) -> Any:
     """A copy of a JSON-ready structure (dicts, lists, tuples, numpy arrays and scalars) with
-    every float cleaned by :func:`clean_float`; other values as they are."""
+    every float cleaned by :func:`clean_float`, NaN and infinities as None (JSON's ``null``:
+    JSON has no NaN, and :func:`markerplace.jsonfile.read_json` refuses one); other values as
+    they are."""
     if obj is None or isinstance(obj, (bool, str, int)):
         return obj
     if isinstance(obj, (float, np.floating)):
-        return clean_float(obj, digits)
+        value = clean_float(obj, digits)
+        return value if math.isfinite(value) else None  # JSON has no NaN: null (read back as "not a number")
     if isinstance(obj, (np.integer, np.bool_)):
         return obj.item()
     if isinstance(obj, np.ndarray):

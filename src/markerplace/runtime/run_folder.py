@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Iterable
 
 from markerplace.errors import UserError, write_error
-from markerplace.runtime.run_lock import RunLock
+from markerplace.runtime.run_lock import RunLock, check_bookkeeping, release_readers
 from markerplace import __version__
 from markerplace.output_checks import check_output_dir
 
@@ -97,6 +97,7 @@ class RunFolder:
         self.dirs: set[str] = set()
         self._made: list[Path] = []  # folders this open created, the run folder's parents first
         self._manifest_fh = None
+        self._pristine = False  # this open wrote the marker (a new, empty or adopted folder) and nothing else yet
         self.lock = RunLock(self.real / LOCK, f"{option} {self.path}")
 
     def relative(self, path) -> str | None:
@@ -138,6 +139,7 @@ class RunFolder:
             except OSError as err:
                 raise write_error(self.real / MANIFEST, err) from None
             self._apply(op, rel)
+            self._pristine = False
 
     def _mark(self, command: str) -> None:
         """Write the marker when the folder has none (made now, empty, or adopted)."""
@@ -152,6 +154,7 @@ class RunFolder:
         try:
             tmp.write_text(text)
             os.replace(tmp, marker)
+            self._pristine = True
         except OSError as err:
             tmp.unlink(missing_ok=True)
             raise write_error(marker, err) from None
@@ -252,7 +255,8 @@ class RunFolder:
         if not self.lock.held:
             return
         try:
-            if set(os.listdir(self.real)) <= set(BOOKKEEPING):  # nothing written: leave it as it was found
+            if set(os.listdir(self.real)) <= set(BOOKKEEPING) or self._pristine:
+                # nothing written: leave it as it was found (an adopted folder a refused run wrote nothing into too)
                 for name in (MARKER, MANIFEST):
                     (self.real / name).unlink(missing_ok=True)
         except OSError:
@@ -304,6 +308,7 @@ def open_run_folder(path, command: str, *, adopt: bool = False, option: str = "-
     if link is not None:
         raise RunFolder(given, option)._link_error(Path(link))
     check_output_dir(given, option)
+    check_bookkeeping(Path(real), (MARKER, MANIFEST), f"{option} {given}")  # the lock: RunLock.acquire
     made = [Path(os.path.abspath(p)) for p in (given, *given.parents) if not os.path.lexists(p)][::-1]
     try:
         given.mkdir(parents=True, exist_ok=True)
@@ -326,6 +331,7 @@ def close_all() -> None:
     """Close every run folder this process opened (the CLI calls it when a command ends)."""
     while _open:
         _open.pop().close()
+    release_readers()  # export, evaluate --plan: the plan folders read
 
 
 def find(path) -> RunFolder | None:

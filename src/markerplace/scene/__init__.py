@@ -8,6 +8,7 @@ writes any scene as a standard binary glTF.
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 from markerplace.errors import UserError
@@ -41,7 +42,7 @@ def load_scene(spec: str, up: str | None = None, unit_scale: float | None = None
         if (up not in (None, "z")) or (unit_scale not in (None, 1.0)):
             log.warning("--up and --unit-scale apply to mesh files only; ignored for built-in scene %r", key)
         return get_builtin(key.lower(), seed)
-    if Path(key).suffix or Path(key).exists():
+    if Path(key).suffix or os.path.lexists(key):  # a link loop or a dangling link too: the loader says what it is
         return load_mesh_file(key, up=up, unit_scale=unit_scale)
     raise UserError(
         f"unknown scene {key!r}: give a built-in name ({', '.join(builtin_names())}) "

@@ -9,6 +9,10 @@ Axis conventions
 
 Checks and recentring (:mod:`markerplace.scene.sanity`)
 --------------------------------------------------------
+* Before anything is read (:mod:`markerplace.scene.preflight`): a named pipe, a device or a
+  link loop is named as such; the header must fit the file's size and format; texture sizes
+  are read from their headers (a huge one downscaled with a warning naming it); the memory the
+  load takes is compared with the free memory (``--force`` overrides).
 * Vertices with NaN/inf coordinates are dropped with the faces using them (a warning gives the
   counts); a file with more than 5 % such vertices is refused.
 * A model whose bounding-box centre lies more than 1 km from the origin (survey coordinates) is
@@ -44,7 +48,8 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.scene.worldframe import OFFSET_KEY
-from markerplace.scene import sanity
+from markerplace.input_checks import input_kind
+from markerplace.scene import preflight, sanity
 from markerplace.scene.mesh_text import decode_text, original_names
 from markerplace.scene.transparency import material_transparency, read_gltf_json
 from markerplace.scene.types import MeshPart, Scene
@@ -93,6 +98,9 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
     """
     path = Path(path)
     ext = path.suffix.lower()
+    kind = input_kind(path)
+    if kind not in (None, "missing", "a folder"):  # a FIFO, /dev/zero, a link loop: never read, never "no such file"
+        raise UserError(f"{path} is {kind}: give a mesh file ({', '.join(SUPPORTED_EXTENSIONS)})")
     if ext not in SUPPORTED_EXTENSIONS:
         raise UserError(
             f"{path}: unknown scene format {ext or '(no extension)'!r}; supported: "
@@ -110,7 +118,19 @@ def load_mesh_file(path: str | Path, up: str | None = None, unit_scale: float | 
         raise UserError(f"--unit-scale {unit_scale!r} must be a positive number (e.g. 0.01 for centimetres)")
     is_gltf = ext in (".glb", ".gltf")
     R = up_rotation(up if up is not None else ("y" if is_gltf else "z"))
+    try:  # header against size, texture sizes, memory: refused at once, not after minutes (scene.preflight)
+        data_kind = preflight.check_header(path, ext)
+        textures = preflight.texture_sizes(path, ext)
+    except OSError as err:
+        raise UserError(f"cannot read {path}: {err.strerror or err}") from None
+    preflight.check_textures(textures, sanity.warn_once)
+    preflight.check_memory(path, data_kind, textures)
+    with preflight.pillow_limit():
+        return _load(path, ext, R, scale, is_gltf, up)
 
+
+def _load(path: Path, ext: str, R: np.ndarray, scale: float, is_gltf: bool, up: str | None) -> Scene:
+    """The body of :func:`load_mesh_file` once the file passed its checks."""
     instances = _read_instances(path, ext)
     if not instances:
         raise UserError(f"{path}: the file contains no triangle faces (a point cloud or empty mesh?); give a triangle mesh")
@@ -316,7 +336,9 @@ def _rgba_u8(colors) -> np.ndarray:
 
 
 def _shared_texture(image, textures: dict[str, np.ndarray]) -> np.ndarray:
-    """PIL image -> read-only (H, W, 3) uint8 RGB array; equal images share one array."""
+    """PIL image -> read-only (H, W, 3) uint8 RGB array (at most
+    :data:`~markerplace.scene.preflight.MAX_TEXTURE_SIDE` a side); equal images share one array."""
+    image = preflight.downscaled(image)
     if image.mode in ("RGBA", "LA", "P"):
         image = image.convert("RGBA")
     arr = np.asarray(image.convert("RGB"), dtype=np.uint8)

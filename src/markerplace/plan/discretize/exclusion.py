@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
+from markerplace.input_checks import check_input_file
 from markerplace.jsonfile import read_json
 from markerplace.scene.worldframe import points_to_user
 
@@ -100,9 +101,8 @@ def load_exclusion(path: str | Path) -> Exclusion:
             file with neither spots nor boxes.
     """
     path = Path(path)
-    if not path.is_file():
-        raise UserError(f"--exclude {path}: no such file; give a JSON file of spots and boxes to avoid "
-                        "(or the rejected.json that report.html downloads)")
+    check_input_file(path, f"--exclude {path}", "a JSON file of spots and boxes to avoid",
+                     "; give a JSON file of spots and boxes to avoid (or the rejected.json that report.html downloads)")
 
     doc = read_json(path, f"--exclude {path}")  # size, UTF-8 and depth guards, one line
     _keys(doc, _TOP_KEYS, "the file", path)

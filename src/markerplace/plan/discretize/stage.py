@@ -391,6 +391,13 @@ def _storey_report(s: int, floor_z: float, grid: Grid, open_floor: np.ndarray, s
             "unreached": [{"area_m2": a, "centre": [float(v) for v in c]} for a, c in space.unreached]}
 
 
+def discretize_key(scene, config: DiscretizeConfig, tag_size: float) -> str:
+    """The discretize stage's cache key: the scene (geometry; the parts' names and glass, which
+    decide the wall spots that may carry a tag), ``config`` and ``tag_size``."""
+    labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
+    return cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.cache_view(tag_size))
+
+
 def run_discretize(scene, config: DiscretizeConfig, tag_size: float, run_dir: Path,
                    timings: dict) -> tuple[Discretization, str]:
     """The discretize stage of a run folder: ``run_dir/discretization.npz``, reused while the
@@ -400,9 +407,7 @@ def run_discretize(scene, config: DiscretizeConfig, tag_size: float, run_dir: Pa
     Returns:
         (the discretization, the stage's cache key, which the later stages' keys include).
     """
-    # the parts' names and glass decide which wall spots may carry a tag (discretize.wall_candidates)
-    labels = [(p.name, tuple(p.names), bool(p.transparent)) for p in scene.parts]
-    key = cache.hash_of("discretize-v4", cache.scene_hash(scene), labels, config.cache_view(tag_size))
+    key = discretize_key(scene, config, tag_size)
     disc = cached("discretize", run_dir / "discretization.npz", key, lambda: discretize(scene, config, tag_size),
                   save_discretization, load_discretization, timings)
     log.info("discretize: %d camera locations x %d yaws = %d poses, %d candidate marker poses",

@@ -18,7 +18,7 @@ from markerplace.report.tagmaps import ros2  # noqa: F401
 from markerplace.report.tagmaps.format import TAG_MAP_FORMATS, TagMapContext
 from markerplace.runtime.atomic_io import atomic_path
 
-__all__ = ["write_tag_maps"]
+__all__ = ["write_tag_maps", "tag_map_patterns"]
 
 
 def _in_file_axes(markers: Sequence, world_from_file: np.ndarray) -> list:
@@ -31,6 +31,12 @@ def _suffixed(name: str, suffix: str) -> str:
     """``name`` with ``suffix`` before its extensions (``a.launch.yaml`` -> ``a_yup.launch.yaml``)."""
     stem, _, ext = name.partition(".")
     return f"{stem}{suffix}.{ext}"
+
+
+def tag_map_patterns(folder: str = "tagmaps") -> list[str]:
+    """The names :func:`write_tag_maps` gives its files in ``folder``, as ``fnmatch`` patterns (the
+    suffix of the file-axes copies depends on the axis) for :func:`markerplace.runtime.claims.refuse_foreign`."""
+    return [f"{folder}/{name}" for fmt in TAG_MAP_FORMATS.values() for name in (fmt.file, _suffixed(fmt.file, "_*up"))]
 
 
 def write_tag_maps(folder: str | Path, markers: Sequence, *, name: str, field: tuple[float, float],

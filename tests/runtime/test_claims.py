@@ -1,0 +1,56 @@
+"""An adopted folder holding a file of the user's named like one of the run's outputs is refused
+before any work, and left as it was found (:mod:`markerplace.runtime.claims`, issue 50 item 5);
+the declared outputs cover everything ``plan`` writes."""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from helpers import FAST
+from markerplace.cli.main import main
+from markerplace.pipelines.check import CHECK_OUTPUTS
+from markerplace.pipelines.plan import PLAN_OUTPUTS
+from markerplace.runtime import run_folder
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p.relative_to(folder).as_posix(): (p.read_bytes() if p.is_file() else "dir") for p in folder.rglob("*")}
+
+
+@pytest.mark.parametrize("name", ["placement.json", "tags.pdf", "report.html", "config.json", "scores.npz",
+                                  "tags/01_tag0.svg", "tagmaps/wpilib_field_layout.json", "observations"])
+def test_adopting_a_folder_with_a_foreign_output_is_refused_before_any_work(name, tmp_path, capsys):
+    out = tmp_path / "theirs"
+    (out / name).parent.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text("the user's own")  # "observations": a file where the run makes a folder
+    (out / "notes.txt").write_text("mine")
+    before = _snapshot(out)
+    t0 = time.perf_counter()
+    assert main(["plan", "tiny", "-k", "2", "--out", str(out), "--adopt", *FAST]) == 2
+    seconds = time.perf_counter() - t0
+    err = capsys.readouterr().err
+    assert err.startswith("markerplace: error: ") and err.count("\n") == 1 and name in err, err
+    assert "checked before any work" in err and seconds < 5.0
+    assert _snapshot(out) == before  # no half-written folder, no bookkeeping left
+
+
+def test_check_refuses_a_foreign_output_in_its_adopted_out_before_any_work(run_plan, tmp_path, capsys):
+    plan = run_plan(2, folder="claims")
+    out = tmp_path / "theirs"
+    out.mkdir()
+    (out / "check.json").write_text("{}")
+    assert main(["check", str(plan), "--installed", str(plan / "placement.json"), "--out", str(out), "--adopt",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "check.json is not written by markerplace" in err, err
+    written = [json.loads(line)[1] for line in (plan / run_folder.MANIFEST).read_text().splitlines()]
+    for rel in written:  # every file plan wrote is one it declares (a new output must be declared too)
+        if not os.path.isdir(plan / rel):
+            assert any(fnmatch.fnmatchcase(rel, p) or p.endswith("/") and rel.startswith(p) for p in PLAN_OUTPUTS), rel
+    assert any(fnmatch.fnmatchcase("check_map.png", p) for p in CHECK_OUTPUTS)
