@@ -349,7 +349,7 @@ def test_measured_estimate_with_location_views_charges_half_a_face(monkeypatch):
     real = size_guard.ImagingEngine.render
     monkeypatch.setattr(size_guard.ImagingEngine, "render",
                         lambda self, *a, **k: shapes.append(real(self, *a, **k).rgb.shape[:2]) or real(self, *a, **k))
-    pose = size_guard.time_sample(spec, disc.world_from_cam, config.imaging, n=6)
+    pose = size_guard.time_sample(spec, disc.world_from_cam, replace(config.imaging, observe_views="pose"), n=6)
     assert set(shapes) == {(450, 600)}
     for views in ("location-renders", "location-features"):
         shapes.clear()
