@@ -56,9 +56,10 @@ def _parse_pose(text: str):
 
 def cmd_scene_list(args: argparse.Namespace) -> int:
     rows = list_scenes()
-    print(f"{'name':<10} {'floor area (m^2)':>16} {'rooms':>6}  description")
+    width = max(10, *(len(r["name"]) for r in rows))
+    print(f"{'name':<{width}} {'floor area (m^2)':>16} {'rooms':>6}  description")
     for r in rows:
-        print(f"{r['name']:<10} {r['area_m2']:>16.1f} {r['rooms']:>6}  {r['description']}")
+        print(f"{r['name']:<{width}} {r['area_m2']:>16.1f} {r['rooms']:>6}  {r['description']}")
     return 0
 
 

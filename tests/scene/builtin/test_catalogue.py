@@ -14,7 +14,7 @@ from markerplace.scene.builtin.catalogue import build_builtin, builtin_names, ge
 from markerplace.scene.builtin.textures import BUNDLED_PHOTOS, bundled_photo
 
 AREA_RANGES = {"office": (95, 125), "studio": (130, 170), "apartment": (270, 330), "room": (18, 24), "tiny": (0, 15), "house": (120, 170),
-               "campus": (2000, 2200), "corridor": (200, 320)}
+               "campus": (2000, 2200), "corridor": (200, 320), "corridor-small": (120, 160)}
 EYE = 1.5
 
 

@@ -1,7 +1,7 @@
-"""Built-in ``corridor`` (a hotel floor that is hard to localize in): at least 8 guest rooms
+"""Built-in ``corridor`` (a hotel floor that is hard to localize in): ten guest rooms
 identical up to a translation, over 200 m^2 at the default size, every room reachable from the
 corridor through a doorway, a room count that sizes it, builds that are deterministic in the seed
-and cheap."""
+and cheap; ``corridor-small`` (the demo's scene) is the same floor with four rooms."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from markerplace.errors import UserError
 from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.scene import load_scene
 from markerplace.scene.builtin.catalogue import get_layout, list_scenes
-from markerplace.scene.builtin.corridor import CELL, MIN_ROOMS, ROOM_DEPTH, ROOMS, build_corridor, corridor_plan, room_name
+from markerplace.scene.builtin.corridor import (CELL, MIN_ROOMS, ROOM_DEPTH, ROOMS, SMALL_NAME, SMALL_ROOMS, build_corridor,
+                                                corridor_plan, room_name)
 from markerplace.scene.builtin.walls import door_span
 
 CORRIDOR_XY = (5.0, ROOM_DEPTH + 0.9)  # a point in the corridor
@@ -139,3 +140,32 @@ def test_cli_scene_export(tmp_path):
     assert main(["scene", "export", "corridor", str(out)]) == 0
     back = load_scene(str(out))
     np.testing.assert_allclose(back.bounds, load_scene("corridor").bounds, atol=1e-4)
+
+
+def test_corridor_small_is_the_floor_with_fewer_rooms():
+    small = load_scene(SMALL_NAME)
+    assert (small.name, small.source) == (SMALL_NAME, f"builtin:{SMALL_NAME}")
+    assert small.meta["guest_rooms"] == [room_name(i) for i in range(SMALL_ROOMS)] and SMALL_ROOMS < ROOMS
+    assert len(small.meta["twins"]) == SMALL_ROOMS - 1
+    row = next(r for r in list_scenes() if r["name"] == SMALL_NAME)
+    assert row["rooms"] == SMALL_ROOMS + 2 and f"{SMALL_ROOMS} identical guest rooms" in row["description"]
+    assert row["area_m2"] == pytest.approx(corridor_plan(SMALL_ROOMS).floor_area)
+    # the same geometry and textures as the hotel floor built with that many rooms, up to the names
+    same = build_corridor(0, rooms=SMALL_ROOMS)
+    assert [p.name.replace(SMALL_NAME, "corridor", 1) for p in small.parts] == [p.name for p in same.parts]
+    assert _digest(small) != _digest(same)  # the names differ
+    for p, q in zip(small.parts, same.parts):
+        for a, b in ((p.vertices, q.vertices), (p.faces, q.faces), (p.texture, q.texture)):
+            assert (a is None and b is None) or np.array_equal(a, b)
+    assert [r.bounds for r in small.rooms] == [r.bounds for r in same.rooms]
+
+
+def test_corridor_small_reaches_every_room_on_the_demo_grid():
+    # the demo plans corridor-small on a 1 m camera grid (scripts/demo.sh): every room has cameras
+    scene = load_scene(SMALL_NAME)
+    disc = discretize(scene, DiscretizeConfig(grid_spacing=1.0, start=CORRIDOR_XY))
+    for room in scene.rooms:
+        x0, y0, x1, y1 = room.bounds
+        inside = ((disc.locations[:, 0] > x0) & (disc.locations[:, 0] < x1)
+                  & (disc.locations[:, 1] > y0) & (disc.locations[:, 1] < y1))
+        assert inside.sum() >= 3, room.name

@@ -4,7 +4,9 @@ Sizes follow the paper's scenes: office ~110 m^2, studio ~150 m^2, apartment ~30
 room ~21 m^2, plus ``tiny`` (13 m^2) for fast tests, the two-storey ``house`` (158 m^2,
 :mod:`.house`), the two-storey office building ``campus`` for scale tests (2064 m^2,
 :mod:`.campus`) and the hotel floor ``corridor`` (288 m^2, ten identical guest rooms: hard to
-localize in, :mod:`.corridor`; :func:`.corridor.build_corridor` takes the room count). Coordinates are metres, world z up; room
+localize in, :mod:`.corridor`; :func:`.corridor.build_corridor` takes the room count) with its
+smaller copy ``corridor-small`` (141 m^2, four identical guest rooms: the demo's scene, read from
+the same spec). Coordinates are metres, world z up; room
 bounds are wall centre lines; furniture and pictures are in room-local coordinates.
 
 The layouts are data: the rooms, furniture, pictures, windows and doors of each built-in are in
@@ -22,7 +24,7 @@ import functools
 from markerplace.errors import UserError
 from markerplace.scene.builtin.layout import Building, Layout
 from markerplace.scene.builtin.campus import build_campus, campus_plan
-from markerplace.scene.builtin.corridor import build_corridor, corridor_plan
+from markerplace.scene.builtin.corridor import SMALL_NAME, build_corridor, build_small_corridor, corridor_plan, small_corridor_plan
 from markerplace.scene.builtin.house import build_house, house_plan
 from markerplace.scene.builtin.procedural import build_scene
 from markerplace.scene.builtin.spec_loader import load_layout
@@ -30,15 +32,22 @@ from markerplace.scene.types import Scene
 
 # single-storey built-ins: their room specs are data (specs/<name>.toml, read by spec_loader)
 _LAYOUTS = {name: functools.partial(load_layout, name) for name in ("office", "studio", "apartment", "room", "tiny")}
-_LAYOUTS |= {"house": house_plan, "campus": campus_plan, "corridor": corridor_plan}
+_LAYOUTS |= {"house": house_plan, "campus": campus_plan, "corridor": corridor_plan, SMALL_NAME: small_corridor_plan}
 # built-ins with their own builders (multi-storey, or laid out in code); the others use
 # procedural.build_scene
-_BUILDERS = {"house": build_house, "campus": build_campus, "corridor": build_corridor}
+_BUILDERS = {"house": build_house, "campus": build_campus, "corridor": build_corridor, SMALL_NAME: build_small_corridor}
+# built-ins read from another one's spec file (the others from specs/<name>.toml)
+_SPECS = {SMALL_NAME: "corridor"}
 
 
 def builtin_names() -> list[str]:
     """Names of the built-in scenes, in catalogue order."""
     return list(_LAYOUTS)
+
+
+def spec_of(name: str) -> str:
+    """The spec file (``specs/<spec>.toml``, without its suffix) built-in ``name`` is read from."""
+    return _SPECS.get(name, name)
 
 
 @functools.lru_cache(maxsize=None)

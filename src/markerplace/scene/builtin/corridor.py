@@ -29,6 +29,9 @@ The rooms' contents, the corridor's finish, the lobby and its doorway are data, 
 ``scene/builtin/specs/corridor.toml`` (TOML, format in its header and in :mod:`.spec_loader`);
 this module lays out the ``n`` rooms and the corridor and connects them.
 
+The built-in ``corridor-small`` is the same floor with :data:`SMALL_ROOMS` guest rooms (the
+demo's scene: small enough to plan and evaluate in minutes, still one template repeated).
+
 ``Scene.meta`` keys: ``twins`` (pairs (room_01, room_k): identical up to a translation),
 ``ceiling_height``, ``seed``, ``guest_rooms`` (their names, west to east), ``cell`` (the x step
 between rooms, metres).
@@ -47,10 +50,13 @@ from markerplace.scene.types import Scene
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CELL", "CORRIDOR_WIDTH", "MIN_ROOMS", "ROOM_DEPTH", "ROOMS", "build_corridor", "corridor_plan", "room_name"]
+__all__ = ["CELL", "CORRIDOR_WIDTH", "MIN_ROOMS", "ROOM_DEPTH", "ROOMS", "SMALL_NAME", "SMALL_ROOMS", "build_corridor",
+           "build_small_corridor", "corridor_plan", "room_name", "small_corridor_plan"]
 
 ROOMS = 10  # guest rooms at the default size
-MIN_ROOMS = 8
+SMALL_ROOMS = 4  # guest rooms of the built-in ``corridor-small`` (the demo's scene)
+SMALL_NAME = "corridor-small"
+MIN_ROOMS = 2  # identical rooms need at least two
 CELL = 3.6  # guest room width along the corridor (x), metres
 ROOM_DEPTH = 5.0  # guest room depth (y), metres; the corridor's south wall is at y = ROOM_DEPTH
 CORRIDOR_WIDTH = 1.8
@@ -85,12 +91,24 @@ def corridor_plan(rooms: int = ROOMS) -> Layout:
     return replace(layout, description=spec["description"].format(rooms=rooms, area=layout.floor_area))
 
 
-def build_corridor(seed: int = 0, rooms: int = ROOMS) -> Scene:
-    """Build the ``corridor`` scene with ``rooms`` guest rooms (deterministic in ``seed`` and
-    ``rooms``). The scene is named ``corridor`` at every size (``source = "builtin:corridor"``);
-    ``meta["guest_rooms"]`` says how many rooms it has."""
-    plan = corridor_plan(rooms)
+def small_corridor_plan() -> Layout:
+    """The layout of ``corridor-small``: :func:`corridor_plan` with :data:`SMALL_ROOMS` rooms,
+    named :data:`SMALL_NAME`."""
+    return replace(corridor_plan(SMALL_ROOMS), name=SMALL_NAME)
+
+
+def build_corridor(seed: int = 0, rooms: int = ROOMS, name: str = "corridor") -> Scene:
+    """Build the hotel floor with ``rooms`` guest rooms (deterministic in ``seed`` and ``rooms``),
+    named ``name`` (``source = "builtin:<name>"``; the built-ins ``corridor`` and
+    ``corridor-small``); ``meta["guest_rooms"]`` says how many rooms it has. Part names start
+    with ``name``, so the same floor under two names differs only in its names."""
+    plan = replace(corridor_plan(rooms), name=name)
     scene = build_scene(plan, seed)
     guests = [room_name(i) for i in range(rooms)]
-    log.debug("built corridor with %d guest rooms (%.1f m^2)", rooms, plan.floor_area)
+    log.debug("built %s with %d guest rooms (%.1f m^2)", name, rooms, plan.floor_area)
     return replace(scene, meta={**scene.meta, "guest_rooms": guests, "cell": CELL})
+
+
+def build_small_corridor(seed: int = 0) -> Scene:
+    """Build ``corridor-small`` (:data:`SMALL_ROOMS` guest rooms); see :func:`build_corridor`."""
+    return build_corridor(seed, SMALL_ROOMS, SMALL_NAME)
