@@ -22,9 +22,17 @@ Groups of cases: :func:`cases` (files, numbers, output paths, ``--existing``, da
 :func:`checked_input_cases` (tag ids, poses, JSON depth, cluster addresses with silent and
 garbage servers on 127.0.0.1, ``-k`` against the candidates, argument errors, the minor list),
 :func:`interrupt_cases` (Ctrl-C and SIGTERM at each stage), :func:`folder_cases` (run folders
-and concurrency: the place for issue 35's items 1-3) and :func:`issue50_cases` (files that are not
+and concurrency: the place for issue 35's items 1-3), :func:`issue50_cases` (files that are not
 what their names say, stdout, encodings, resource limits, odd bookkeeping files, refusals before
-any work, a plan folder's files checked against each other).
+any work, a plan folder's files checked against each other) and :func:`probe_cases` (``--group
+probe``, 122 cases in about 6 minutes: the categories of issue 50's independent probe: a foreign
+file or folder named like each output of plan, check, evaluate and study in an adopted folder, a
+symlink out of the run folder under each output name, the manifest, marker and lock files edited,
+odd ``--out`` paths, a full disk (a 256 kB tmpfs; skipped with its reason when it cannot be
+mounted), a Dask scheduler without workers, TOML nesting, stdout full, closed or a broken pipe,
+and a service account, uid 65534). A case whose set-up this machine cannot make is reported as
+``SKIP`` with the reason. ``tests/e2e/test_hostile_script.py`` runs :data:`CHEAP_PROBE`, one
+probe case of each kind.
 """
 
 from __future__ import annotations
