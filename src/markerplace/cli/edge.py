@@ -11,7 +11,8 @@ command and turned into one line ``markerplace: error: ...`` with exit code 2.
   (:func:`check_working_directory`); relative paths cannot be resolved there and some native
   libraries abort with a line of their own.
 * Resource limits (``ulimit -n``, ``ulimit -v``, a machine out of memory): :func:`resource_error`
-  names the limit and what to change.
+  names the limit and what to change; a path the file system finds too long (``--out`` with a
+  300-character name) is one line too.
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ def _limit(which: int) -> str:
 def resource_error(err: BaseException, resumable: bool) -> UserError | None:
     """The one-line error for running out of memory or of file descriptors (``err`` a
     ``MemoryError``, an ``OSError`` or the ``ImportError`` of a native library that could not be
-    mapped), naming the limit in force; None for any other error."""
+    mapped), naming the limit in force, or for a path longer than the file system allows; None
+    for any other error."""
     again = " (the stages already done are reused)" if resumable else ""
     mapped = isinstance(err, ImportError) and "failed to map segment" in str(err)  # a native library under ulimit -v
     if isinstance(err, MemoryError) or getattr(err, "errno", None) == errno.ENOMEM or mapped:
@@ -120,6 +122,9 @@ def resource_error(err: BaseException, resumable: bool) -> UserError | None:
         where = "" if limit == "unlimited" else f" (`ulimit -v` limits this process to {int(limit) // 1024} KiB)"
         return UserError(f"out of memory{where}: raise the limit, close other programs or use a machine with more "
                          f"memory, or plan a coarser run (--grid-spacing, --yaws), then run again{again}")
+    if getattr(err, "errno", None) == errno.ENAMETOOLONG:  # --out x*300: found by the first stat under it
+        return UserError(f"{err.filename}: {os.strerror(errno.ENAMETOOLONG)}: give a shorter path (a file or folder "
+                         "name has at most 255 bytes on most file systems)")
     if getattr(err, "errno", None) in (errno.EMFILE, errno.ENFILE):
         return UserError(f"too many open files (`ulimit -n` is {_limit(resource.RLIMIT_NOFILE)}): raise it (e.g. "
                          f"`ulimit -n 4096`) or use fewer --workers, then run again{again}")
