@@ -92,3 +92,10 @@ def test_an_out_path_with_a_name_too_long_for_the_file_system_is_one_line(tmp_pa
     err = capsys.readouterr().err
     assert err.startswith("markerplace: error: ") and err.count("\n") == 1 and "File name too long" in err, err
     assert "give a shorter path" in err and list(tmp_path.iterdir()) == []
+
+
+def test_a_closed_stdout_is_one_line():
+    res = subprocess.run([sys.executable, "-m", "markerplace.cli", "--version"], stderr=subprocess.PIPE, text=True,
+                         env=ENV, timeout=300, preexec_fn=lambda: os.close(1))  # the shell's `>&-`
+    assert "Traceback" not in res.stderr
+    _one_line(res, "cannot write to standard output: it is closed")

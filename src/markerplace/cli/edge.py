@@ -4,8 +4,9 @@ command and turned into one line ``markerplace: error: ...`` with exit code 2.
 * Standard output: :class:`StdoutGuard` wraps ``sys.stdout`` for the command's life. A character
   its encoding cannot hold (``--out été`` printed to an ASCII terminal, ``LC_ALL=C``) is written
   as a backslash escape instead of raising ``UnicodeEncodeError`` after all the work; a write or
-  flush that fails (``> /dev/full``) becomes :class:`StdoutError`, and the stream is pointed at
-  ``/dev/null`` so that Python's own flush at exit stays quiet. A pipe closed by its reader
+  flush that fails (``> /dev/full``, or standard output closed: ``>&-``) becomes
+  :class:`StdoutError`, and the stream is pointed at ``/dev/null`` so that Python's own flush at
+  exit stays quiet. A pipe closed by its reader
   (``| head -1``) ends the command quietly with exit code 141, as SIGPIPE ends shell tools.
 * The working directory deleted under the shell: refused before anything is read
   (:func:`check_working_directory`); relative paths cannot be resolved there and some native
@@ -70,14 +71,32 @@ class _GuardedStream:
         return getattr(self._stream, name)
 
 
+class _ClosedStream:
+    """Standard output closed by the shell (``markerplace --version >&-``): Python then has no
+    ``sys.stdout`` at all; here every write fails as on a closed descriptor (one line, exit 2)."""
+
+    encoding = "utf-8"
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, "it is closed")
+
+    def flush(self) -> None:
+        pass
+
+    def fileno(self) -> int:
+        raise OSError(errno.EBADF, "it is closed")
+
+    def isatty(self) -> bool:
+        return False
+
+
 class StdoutGuard:
     """Context manager: ``sys.stdout`` guarded (see the module docstring) inside, restored after.
     :meth:`silence` points the real stream at ``/dev/null`` after a failure."""
 
     def __enter__(self) -> "StdoutGuard":
         self._saved = sys.stdout
-        if sys.stdout is not None:
-            sys.stdout = _GuardedStream(sys.stdout)
+        sys.stdout = _GuardedStream(sys.stdout if sys.stdout is not None else _ClosedStream())
         return self
 
     def silence(self) -> None:
