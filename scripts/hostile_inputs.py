@@ -933,9 +933,11 @@ def probe_cases(w: Path, f: dict) -> list[Case]:
         else:
             path.write_text(text)
         c.append(Case(f"TOML: {what}", plan(f"tm{i}", "--config", str(path)), "error", texts[what], extra=quick))
-    c += [Case("--config a FIFO named x.toml", plan("tm_f", "--config", str(w / "fifo.toml")), "error", "--config",
+    c += [Case("--config a FIFO named x.toml", plan("tm_f", "--config", str(w / "fifo.toml")), "error",
+               "is a named pipe (FIFO), not a settings file",
                setup=lambda: (w / "fifo.toml").exists() or os.mkfifo(w / "fifo.toml"), extra=quick),
-          Case("--config a folder named x.toml", plan("tm_d", "--config", str(w / "dir.toml")), "error", "--config",
+          Case("--config a folder named x.toml", plan("tm_d", "--config", str(w / "dir.toml")), "error",
+               "is a folder, not a settings file",
                setup=lambda: (w / "dir.toml").mkdir(exist_ok=True), extra=quick),
           Case("--config /dev/zero", plan("tm_z", "--config", "/dev/zero"), "error", "--config", extra=quick)]
     # standard output full, closed or a broken pipe
