@@ -759,7 +759,7 @@ CHEAP_PROBE = ("adopt plan: a foreign placement.csv", "adopt plan: a folder name
                "adopt study: a foreign study.md",
                "plan resumes: tags a symlink out", "plan resumes: the manifest's placement.json line deleted",
                "plan resumes: the manifest is a folder", "plan resumes: the lock a symlink out",
-               "--out 300 characters long", "--out=-dash", "--cluster-wait without --cluster",
+               "--out 300 characters long", "--out a dangling symlink", "--cluster-wait without --cluster",
                "TOML: [a.a.a...] 5000 deep", "TOML: grid_spacing = nan", "stdout closed: scene list",
                "stdout a broken pipe: --version", "--config a FIFO named x.toml")
 """The probe cases the default tests run (tests/e2e/test_hostile_script.py): one of each kind, the cheap ones."""

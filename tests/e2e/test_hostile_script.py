@@ -48,7 +48,7 @@ def test_one_probe_case_of_each_kind_ends_as_the_script_expects(probe, capsys, m
     from markerplace.cli.main import main
 
     probe, w, files = probe
-    monkeypatch.chdir(w)  # --out=-dash is relative
+    monkeypatch.chdir(w)  # the script runs its cases there (relative paths)
     cases = {c.name: c for c in probe.probe_cases(w, files)}
     problems = {}
     for name in probe.CHEAP_PROBE:
