@@ -15,7 +15,7 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
 
 Any traceback, any other exit code, a missing message, a run over its time limit or a failed
 output check is reported. Prints one line per case and a summary; writes ``hostile_inputs.md``
-into the work folder. Takes about 8 minutes on 2 cores. Usage::
+into the work folder. Takes about 18 minutes on 2 cores (the probe group 10 of them). Usage::
 
     .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING] [--group NAME]
 
@@ -26,7 +26,7 @@ garbage servers on 127.0.0.1, ``-k`` against the candidates, argument errors, th
 and concurrency: the place for issue 35's items 1-3), :func:`issue50_cases` (files that are not
 what their names say, stdout, encodings, resource limits, odd bookkeeping files, refusals before
 any work, a plan folder's files checked against each other) and :func:`probe_cases` (``--group
-probe``, 122 cases in about 6 minutes: the categories of issue 50's independent probe: a foreign
+probe``, 122 cases in about 10 minutes: the categories of issue 50's independent probe: a foreign
 file or folder named like each output of plan, check, evaluate and study in an adopted folder, a
 symlink out of the run folder under each output name, the manifest, marker and lock files edited,
 odd ``--out`` paths, a full disk (a 256 kB tmpfs; skipped with its reason when it cannot be

@@ -1,4 +1,4 @@
-"""``scripts/hostile_inputs.py`` (the new-user probe, about 8 minutes, not in the default run) still
+"""``scripts/hostile_inputs.py`` (the new-user probe, about 18 minutes, not in the default run) still
 builds its hostile inputs and its cases: the cheap part of it, so that a moved test helper or a
 renamed option breaks the suite instead of the probe. One case of each kind of its ``probe`` group
 (:data:`CHEAP_PROBE`: run folders, ``--out`` paths, TOML, stdout) runs here too, judged as the
