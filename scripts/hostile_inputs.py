@@ -7,6 +7,7 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
   expected text (argument errors included: no argparse usage block);
 * ``warn``: exit 0 with the expected warning on stderr;
 * ``ok``: exit 0 (plus a check of the outputs where it matters);
+* ``sigpipe``: exit 141 and nothing on stderr (standard output a pipe nobody reads, as ``| head -0``);
 * ``interrupted``: the command is started in its own process group, and once its log shows the
   stage, SIGINT (or SIGTERM) goes to the whole group as a terminal's Ctrl-C does: exit 130 (143)
   within 5 s, one line saying how to resume, no traceback, no process of the group left
@@ -14,7 +15,7 @@ Every case runs ``python -m markerplace.cli ...`` in a subprocess and is judged 
 
 Any traceback, any other exit code, a missing message, a run over its time limit or a failed
 output check is reported. Prints one line per case and a summary; writes ``hostile_inputs.md``
-into the work folder. Takes about 8 minutes on 2 cores. Usage::
+into the work folder. Takes about 18 minutes on 2 cores (the probe group 10 of them). Usage::
 
     .venv/bin/python scripts/hostile_inputs.py [--workdir DIR] [--only SUBSTRING] [--group NAME]
 
@@ -22,9 +23,17 @@ Groups of cases: :func:`cases` (files, numbers, output paths, ``--existing``, da
 :func:`checked_input_cases` (tag ids, poses, JSON depth, cluster addresses with silent and
 garbage servers on 127.0.0.1, ``-k`` against the candidates, argument errors, the minor list),
 :func:`interrupt_cases` (Ctrl-C and SIGTERM at each stage), :func:`folder_cases` (run folders
-and concurrency: the place for issue 35's items 1-3) and :func:`issue50_cases` (files that are not
+and concurrency: the place for issue 35's items 1-3), :func:`issue50_cases` (files that are not
 what their names say, stdout, encodings, resource limits, odd bookkeeping files, refusals before
-any work, a plan folder's files checked against each other).
+any work, a plan folder's files checked against each other) and :func:`probe_cases` (``--group
+probe``, 122 cases in about 10 minutes: the categories of issue 50's independent probe: a foreign
+file or folder named like each output of plan, check, evaluate and study in an adopted folder, a
+symlink out of the run folder under each output name, the manifest, marker and lock files edited,
+odd ``--out`` paths, a full disk (a 256 kB tmpfs; skipped with its reason when it cannot be
+mounted), a Dask scheduler without workers, TOML nesting, stdout full, closed or a broken pipe,
+and a service account, uid 65534). A case whose set-up this machine cannot make is reported as
+``SKIP`` with the reason. ``tests/e2e/test_hostile_script.py`` runs :data:`CHEAP_PROBE`, one
+probe case of each kind.
 """
 
 from __future__ import annotations
@@ -57,7 +66,7 @@ FAR = np.array([1.0e6, 2.0e6, 0.0])
 class Case:
     name: str
     argv: list[str]
-    expect: str  # error | warn | ok | interrupted
+    expect: str  # error | warn | ok | interrupted | sigpipe
     text: str = ""
     check: Callable[[], str | None] | None = None  # returns a problem or None
     setup: Callable[[], None] | None = None
@@ -610,20 +619,361 @@ def issue50_cases(w: Path, f: dict) -> list[Case]:
     return c
 
 
+# --- the probe's run-folder categories ------------------------------------------------------------
+
+PRECIOUS = "precious, not markerplace's"
+
+
+def _precious(w: Path, name: str) -> Path:
+    """A file of the user's outside every run folder, which no case may change."""
+    p = w / "precious" / name
+    p.parent.mkdir(exist_ok=True)
+    p.write_text(PRECIOUS)
+    return p
+
+
+def untouched(*paths: Path) -> Callable[[], str | None]:
+    """Each of ``paths`` (made by :func:`_precious`) still holds what it held."""
+    def check():
+        changed = [str(p) for p in paths if not p.is_file() or p.read_text() != PRECIOUS]
+        return f"changed outside the run folder: {', '.join(changed)}" if changed else None
+    return check
+
+
+def always(check: Callable[[], str | None]) -> Callable[[], str | None]:
+    """A case's ``check`` run whatever the exit code (``check`` runs only on exit 0 otherwise)."""
+    check.always = True  # type: ignore[attr-defined]
+    return check
+
+
+def entries(w: Path, name: str, paths: dict) -> Callable[[], None]:
+    """A setup: ``out/name`` made afresh holding ``paths`` (relative path -> text; ``None``: a
+    folder)."""
+    def run():
+        d = w / "out" / name
+        if d.exists():
+            shutil.rmtree(d)
+        for rel, text in paths.items():
+            (d / rel).parent.mkdir(parents=True, exist_ok=True)
+            (d / rel).mkdir() if text is None else (d / rel).write_text(text)
+    return run
+
+
+def replace_with_link(rel: str, target: Path) -> Callable[[Path], None]:
+    def run(folder: Path):
+        p = folder / rel
+        shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink(missing_ok=True)
+        p.symlink_to(target)
+    return run
+
+
+def write_entry(rel: str, data: str | bytes | None) -> Callable[[Path], None]:
+    """Replace ``rel`` with ``data`` (``None``: a folder, ``"fifo"``: a named pipe)."""
+    def run(folder: Path):
+        p = folder / rel
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+        if data is None:
+            p.mkdir()
+        elif data == "fifo":
+            os.mkfifo(p)
+        elif isinstance(data, bytes):
+            p.write_bytes(data)
+        else:
+            p.write_text(data)
+    return run
+
+
+def edit_lines(rel: str, change: Callable[[list[str]], list[str]]) -> Callable[[Path], None]:
+    def run(folder: Path):
+        p = folder / rel
+        p.write_text("".join(line + "\n" for line in change(p.read_text().splitlines())))
+    return run
+
+
+class _Mounts:
+    """The tmpfs mounted by the full-disk cases, unmounted when the probe ends."""
+    paths: list[Path] = []
+
+    @classmethod
+    def full_disk(cls, where: Path) -> Callable[[], None]:
+        def run():
+            if where in cls.paths:
+                return
+            where.mkdir(parents=True, exist_ok=True)
+            res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(where)], capture_output=True,
+                                 text=True)
+            if res.returncode != 0:
+                raise Skip(f"cannot mount a small tmpfs ({res.stderr.strip() or 'not root'})")
+            cls.paths.append(where)
+            with open(where / "filler", "wb") as fh:  # leave about 40 kB free
+                fh.write(bytes(200 * 1024))
+        return run
+
+    @classmethod
+    def release(cls) -> None:
+        for p in cls.paths:
+            subprocess.run(["umount", "-l", str(p)], capture_output=True)
+        cls.paths.clear()
+
+
+class _Cluster:
+    """One ``dask scheduler`` without workers on 127.0.0.1 (tests/helpers/dask_processes.py),
+    started by the first cluster case and stopped when the probe ends."""
+    procs = None
+
+    @classmethod
+    def address(cls, w: Path) -> str:
+        if cls.procs is None:
+            from helpers.dask_processes import DaskProcesses
+
+            cls.procs = DaskProcesses(w / "dask")
+        return cls.procs.address
+
+    @classmethod
+    def release(cls) -> None:
+        if cls.procs is not None:
+            cls.procs.__exit__()
+            cls.procs = None
+
+
+class Skip(Exception):
+    """A case this machine cannot set up (reported with its reason, not counted as bad)."""
+
+
+def nobody(args: list[str] | None = None) -> list[str]:
+    """argv prefix running as uid/gid 65534 (a service account), when root and ``setpriv`` are there."""
+    if os.geteuid() != 0 or not shutil.which("setpriv"):
+        return []
+    return [shutil.which("setpriv"), "--reuid=65534", "--regid=65534", "--clear-groups", "--", *(args or [])]
+
+
+PLAN_FILES = ("placement.json", "placement.csv", "tags.pdf", "report.html", "config.json", "scores.npz", "scores.png",
+              "placement.png", "where.png", "gain_first.png", "similarity.npz", "discretization.npz",
+              "observations.meta.json", "tags/00_tag0.svg", "success_model_omp.json")
+PLAN_FOLDERS = ("observations", "tags", "calibration")
+CHEAP_PROBE = ("adopt plan: a foreign placement.csv", "adopt plan: a folder named placement.json",
+               "adopt check: a foreign check.json", "adopt evaluate: a foreign recall.csv",
+               "adopt study: a foreign study.md",
+               "plan resumes: tags a symlink out", "plan resumes: the manifest's placement.json line deleted",
+               "plan resumes: the manifest is a folder", "plan resumes: the lock a symlink out",
+               "--out 300 characters long", "--out a dangling symlink", "--cluster-wait without --cluster",
+               "TOML: [a.a.a...] 5000 deep", "TOML: grid_spacing = nan", "stdout closed: scene list",
+               "stdout a broken pipe: --version", "--config a FIFO named x.toml")
+"""The probe cases the default tests run (tests/e2e/test_hostile_script.py): one of each kind, the cheap ones."""
+
+
+def probe_cases(w: Path, f: dict) -> list[Case]:
+    """The categories of issue 50's independent probe: foreign files and folders named like each
+    output (``--adopt``, and folders not markerplace's), symlinks out of a run folder, manifest,
+    marker and lock files edited, odd ``--out`` paths, a full disk (a 256 kB tmpfs, root only),
+    a Dask scheduler without workers, TOML nesting and non-finite values, stdout on a full
+    device, closed or a broken pipe, and a service account (uid 65534). Cheap: the run-folder
+    cases refuse before any work or resume a copy of the base plan."""
+    o = lambda name: str(w / "out" / name)  # noqa: E731
+    quick = {"max_seconds": 15}
+    base = f["base"]
+    plan = lambda name, *extra: ["plan", "tiny", "-k", "2", "--out", o(name), *FAST, *extra]  # noqa: E731
+    check = lambda name, *extra: ["check", str(base), "--installed", str(base / "placement.json"), "--out",  # noqa: E731
+                                  o(name), "--quiet", *extra]
+    small_eval = ["--k", "2", "--tests", "10", *FAST]
+    c: list[Case] = []
+    # foreign files and folders named like an output, in an adopted folder: refused before any work
+    adopted = {"plan": (plan, PLAN_FILES), "check": (check, ("check.json", "check.csv", "check_map.png")),
+               "evaluate": (lambda name: ["evaluate", "tiny", "--out", o(name), *small_eval],
+                            ("recall.csv", "tables.md", "timings.json", "test_poses_weighted.npz", "report.html",
+                             "plan/similarity.npz")),
+               "study": (lambda name: ["study", "tiny", "--out", o(name), *small_eval],
+                         ("study.md", "study.csv", "study_v.png", "runs/default/recall.csv"))}
+    for command, (argv, names) in adopted.items():
+        for entry in names:
+            name = f"pa{len(c)}"
+            c.append(Case(f"adopt {command}: a foreign {entry}", [*argv(name), "--adopt"], "error",
+                          f"{entry} is not written by markerplace", extra=quick,
+                          setup=entries(w, name, {entry: "the user's own", "notes.txt": "mine"})))
+        for entry in names[:2]:
+            name = f"pa{len(c)}"
+            c.append(Case(f"adopt {command}: a folder named {entry}", [*argv(name), "--adopt"], "error",
+                          "is a folder where markerplace writes a file", extra=quick,
+                          setup=entries(w, name, {entry: None, "notes.txt": "mine"})))
+        name = f"pa{len(c)}"
+        c.append(Case(f"{command} into a foreign folder without --adopt", argv(name), "error",
+                      "was not made by markerplace", extra=quick, setup=entries(w, name, {"notes.txt": "mine"})))
+    for entry in PLAN_FOLDERS:
+        name = f"pa{len(c)}"
+        c.append(Case(f"adopt plan: a file named {entry}", [*plan(name), "--adopt"], "error",
+                      "is a file where markerplace makes a folder", extra=quick,
+                      setup=entries(w, name, {entry: "the user's own"})))
+    # a copy of the finished base plan, changed, then the same plan again (a resume)
+    outside = w / "precious"
+    for entry in ("placement.json", "placement.csv", "tags.pdf", "report.html", "config.json", "scores.npz"):
+        name, target = f"pl{len(c)}", _precious(w, f"link{len(c)}.txt")
+        c.append(Case(f"plan resumes: {entry} a symlink out", plan(name), "ok",  # the link replaced, not its target
+                      setup=copy_base(w, f, name, replace_with_link(entry, target)), check=always(untouched(target)),
+                      extra={"max_seconds": 40}))
+    for entry in ("tags", "observations"):
+        name, target = f"pl{len(c)}", _precious(w, f"link{len(c)}.txt")
+        c.append(Case(f"plan resumes: {entry} a symlink out", plan(name), "error", "is a symbolic link",
+                      setup=copy_base(w, f, name, replace_with_link(entry, outside)), check=always(untouched(target)),
+                      extra=quick))
+    name = f"pl{len(c)}"
+    c.append(Case("plan resumes: a foreign notes.txt is kept", plan(name), "ok", extra=quick,
+                  setup=copy_base(w, f, name, write_entry("notes.txt", "mine")),
+                  check=lambda n=name: None if (w / "out" / n / "notes.txt").read_text() == "mine" else "notes.txt lost"))
+    manifest, marker, lock = ".markerplace-run.manifest", ".markerplace-run.json", ".markerplace-run.lock"
+    target = _precious(w, "manifest_out.txt")
+    bookkeeping = [
+        ("the manifest's placement.json line deleted", "error", "is not written by markerplace",
+         edit_lines(manifest, lambda ls: [ln for ln in ls if "placement.json" not in ln])),
+        ("the manifest deleted", "error", "is not written by markerplace", lambda d: (d / manifest).unlink()),
+        ("the manifest torn mid-line", "ok", "", edit_lines(manifest, lambda ls: [*ls, '["+f", "plac'])),
+        ("the manifest garbage bytes", "error", "is not written by markerplace", write_entry(manifest, os.urandom(512))),
+        ("the manifest with NaN and numbers", "ok", "", edit_lines(manifest, lambda ls: [*ls, "[NaN, 1]", "1e999",
+                                                                                         '["+f", NaN]'])),
+        ("the manifest claims ../precious", "ok", "",
+         edit_lines(manifest, lambda ls: [*ls, json.dumps(["+f", f"../../precious/{target.name}"])])),
+        ("the manifest claims an absolute path", "ok", "",
+         edit_lines(manifest, lambda ls: [*ls, json.dumps(["+f", str(target)])])),
+        ("the manifest is a folder", "error", "where markerplace keeps its bookkeeping file",
+         write_entry(manifest, None)),
+        ("the manifest a symlink out", "error", "is not written by markerplace",  # a link is no manifest
+         replace_with_link(manifest, target)),
+        ("the manifest a FIFO", "error", "where markerplace keeps its bookkeeping file", write_entry(manifest, "fifo")),
+        ("the marker garbage", "ok", "", write_entry(marker, "{oops")),
+        ("the marker NaN", "ok", "", write_entry(marker, '{"command": NaN}')),
+        ("the marker is a folder", "error", "was not made by markerplace", write_entry(marker, None)),
+        ("the marker a symlink out", "error", "was not made by markerplace",
+         replace_with_link(marker, target)),
+        ("the lock a symlink out", "error", "where markerplace keeps its lock file", replace_with_link(lock, target)),
+        ("the lock a dangling symlink", "error", "is a symbolic link",
+         replace_with_link(lock, w / "nowhere")),
+        ("the lock a FIFO", "error", "where markerplace keeps its lock file", write_entry(lock, "fifo")),
+        ("the lock garbage", "ok", "", write_entry(lock, "{oops")),
+        ("the lock of a dead pid", "ok", "", write_entry(lock, json.dumps({"pid": 2 ** 22 + 7, "host": os.uname()[1],
+                                                                            "command": "plan"}))),
+        ("a cache meta with NaN", "ok", "", write_entry("similarity.npz.meta.json", '{"key": NaN}')),
+        ("placement.json garbage", "ok", "", write_entry("placement.json", "{oops")),
+    ]
+    for what, expect, text, change in bookkeeping:  # a file missing from the manifest is the user's: refused
+        name = f"pl{len(c)}"
+        c.append(Case(f"plan resumes: {what}", plan(name), expect, text, extra={"max_seconds": 40},
+                      setup=copy_base(w, f, name, change), check=always(untouched(target))))
+    # odd --out paths
+    for what, folder in (("non-ASCII", "plän ünï 計画"), ("with spaces", " a plan "), ("leading dash", "-dash")):
+        c.append(Case(f"--out {what}", ["plan", "tiny", "-k", "2", f"--out={w / 'out' / folder}", *FAST], "ok",
+                      setup=copy_base(w, f, folder), check=placement_exists(w / "out" / folder), extra=quick))
+    c.append(Case("--out=-dash", ["plan", "tiny", "-k", "2", "--out=-dash", *FAST], "ok",
+                  setup=lambda: (shutil.rmtree(w / "-dash", ignore_errors=True), shutil.copytree(base, w / "-dash")),
+                  check=placement_exists(w / "-dash"), extra=quick))
+    odd = [("--out 300 characters long", o("x" * 300), "File name too long"),
+           ("--out empty", "", "--out"), ("--out /", "/", "--out /"), ("--out /dev/null", "/dev/null", "/dev/null"),
+           ("--out /proc/self", "/proc/self", "/proc/self"),
+           ("--out a dangling symlink", str(w / "dangling_out"), "which does not exist"),
+           ("--out under /dev/null", "/dev/null/plan", "/dev/null")]
+    for what, path, text in odd:
+        c.append(Case(what, ["plan", "tiny", "-k", "2", "--out", path, *FAST], "error", text, extra=quick,
+                      setup=lambda: (w / "dangling_out").is_symlink() or (w / "dangling_out").symlink_to(w / "gone")))
+    # a service account (uid 65534): an unwritable folder, --version and scene list with an unwritable HOME
+    as_nobody = {"run": {"prefix": nobody(), "env": {**os.environ, "HOME": "/nonexistent"}}}
+    c += [Case("uid 65534: --out in root's folder", ["plan", "tiny", "-k", "2", "--out", o("root_only/p"), *FAST],
+               "error", "cannot write", setup=lambda: (w / "out" / "root_only").mkdir(mode=0o755, exist_ok=True),
+               extra={**as_nobody, **quick}),
+          Case("uid 65534: --version, HOME unwritable", ["--version"], "ok", extra={**as_nobody, **quick}),
+          Case("uid 65534: scene list, HOME unwritable", ["scene", "list"], "ok", extra={**as_nobody, **quick}),
+          Case("uid 65534: a mesh only root may read", ["plan", str(w / "root_mesh.glb"), "-k", "2", "--out", o("nb/p"),
+                                                        *FAST], "error", "ermission denied",
+               setup=lambda: (shutil.copy(f["glb"], w / "root_mesh.glb"), (w / "root_mesh.glb").chmod(0o600),
+                              (w / "out" / "nb").mkdir(exist_ok=True), (w / "out" / "nb").chmod(0o777)),
+               extra={**as_nobody, **quick})]
+    # a full disk: a 256 kB tmpfs (root only)
+    full = w / "full"
+    c += [Case("a full disk: plan --out", ["plan", "tiny", "-k", "2", "--out", str(full / "p"), *FAST], "error",
+               "No space left on device", setup=_Mounts.full_disk(full), extra={"max_seconds": 60}),
+          Case("a full disk: a second plan", ["plan", "tiny", "-k", "2", "--out", str(full / "q"), *FAST],
+               "error", "No space left on device", setup=_Mounts.full_disk(full), extra={"max_seconds": 60}),
+          Case("a full disk: render", ["render", "tiny", "--out", str(full / "v")], "error", "No space left on device",
+               setup=_Mounts.full_disk(full), extra=quick),
+          Case("a full disk: scene export", ["scene", "export", "tiny", str(full / "t.glb")], "error",
+               "No space left on device", setup=_Mounts.full_disk(full), extra=quick)]
+    # a Dask scheduler that has no worker
+    cluster = ["--grid-spacing", "1.0", "--yaws", "4", "--quiet", "--cluster", "{cluster}", "--cluster-wait", "3"]
+    c += [Case("a scheduler with no workers: plan", ["plan", "tiny", "-k", "2", "--out", o("cw1"), *cluster], "error",
+               "no Dask worker joined the scheduler within 3 s", extra={"max_seconds": 30, "cluster": True}),
+          Case("a scheduler with no workers: evaluate", ["evaluate", "tiny", "--out", o("cw2"), "--k", "2", "--tests",
+                                                         "10", *cluster], "error",
+               "no Dask worker joined the scheduler within 3 s", extra={"max_seconds": 30, "cluster": True}),
+          Case("--cluster-wait without --cluster", plan("cw3", "--cluster-wait", "3"), "error",
+               "has no effect without --cluster"),
+          Case("--cluster-wait -1", [*plan("cw4")[:-1], "--cluster", "local:1", "--cluster-wait=-1"], "error",
+               "--cluster-wait"),
+          Case("--cluster-wait nan", [*plan("cw5")[:-1], "--cluster", "local:1", "--cluster-wait", "nan"], "error",
+               "not a finite number")]
+    # TOML: nesting and values a settings file never has
+    toml = {"[a.a.a...] 5000 deep": "[" + ".".join(["a"] * 5000) + "]\nx = 1\n",
+            "inline tables 3000 deep": "a = " + "{b = " * 3000 + "1" + "}" * 3000 + "\n",
+            "arrays of tables 300 deep": "".join(f"[[{'.'.join(['a'] * i)}]]\n" for i in range(1, 300)),
+            "a key 100000 characters long": "x" * 100_000 + " = 1\n",
+            "grid_spacing = nan": "[discretize]\ngrid_spacing = nan\n",
+            "grid_spacing = inf": "[discretize]\ngrid_spacing = inf\n",
+            "k = 1e400": "[placement]\nk = 1e400\n",
+            "a NUL byte": "[discretize]\ngrid_spacing = 1.0\x00\n",
+            "UTF-16": None, "a table where a value goes": "[discretize.grid_spacing]\nx = 1\n"}
+    texts = {"[a.a.a...] 5000 deep": "nests arrays/tables more than", "inline tables 3000 deep": "too deeply",
+             "arrays of tables 300 deep": "nests arrays/tables more than",
+             "a key 100000 characters long": "unknown setting",
+             "grid_spacing = nan": "must be a finite number", "grid_spacing = inf": "must be a finite number",
+             "k = 1e400": "k", "a NUL byte": "is not valid TOML", "UTF-16": "is not valid TOML",
+             "a table where a value goes": "grid_spacing"}
+    for i, (what, text) in enumerate(toml.items()):
+        path = w / f"probe{i}.toml"
+        if text is None:
+            path.write_bytes("[discretize]\ngrid_spacing = 1.0\n".encode("utf-16"))
+        else:
+            path.write_text(text)
+        c.append(Case(f"TOML: {what}", plan(f"tm{i}", "--config", str(path)), "error", texts[what], extra=quick))
+    c += [Case("--config a FIFO named x.toml", plan("tm_f", "--config", str(w / "fifo.toml")), "error",
+               "is a named pipe (FIFO), not a settings file",
+               setup=lambda: (w / "fifo.toml").exists() or os.mkfifo(w / "fifo.toml"), extra=quick),
+          Case("--config a folder named x.toml", plan("tm_d", "--config", str(w / "dir.toml")), "error",
+               "is a folder, not a settings file",
+               setup=lambda: (w / "dir.toml").mkdir(exist_ok=True), extra=quick),
+          Case("--config /dev/zero", plan("tm_z", "--config", "/dev/zero"), "error", "--config", extra=quick)]
+    # standard output full, closed or a broken pipe
+    for what, how, expect in (("on a full device", {"stdout": "/dev/full"}, "error"),
+                              ("closed", {"stdout_closed": True}, "error"),
+                              ("a broken pipe", {"stdout_broken": True}, "sigpipe")):  # as `| head -0`: quiet, 141
+        for argv in (["--version"], ["scene", "list"], ["plan", "--help"]):
+            c.append(Case(f"stdout {what}: {' '.join(argv)}", argv, expect, "standard output",
+                          extra={"run": how, **quick}))
+        name = f"so{len(c)}"
+        c.append(Case(f"stdout {what}: plan (resumed)", plan(name), expect, "standard output",
+                      setup=copy_base(w, f, name), extra={"run": how, "max_seconds": 40}))
+    return c
+
+
 def run_cli(argv: list[str], w: Path, run: dict) -> tuple[int, str, float]:
     """Run the CLI as :func:`cli` does, with a case's ``extra["run"]``: ``env``, ``stdout`` (a
-    path to write it to), ``rlimit`` ((name, value) set in the child) or ``gone_cwd`` (started
-    in a folder deleted under it)."""
+    path to write it to), ``stdout_closed`` / ``stdout_broken`` (no standard output, or a pipe
+    nobody reads), ``prefix`` (argv before the interpreter: ``setpriv``), ``rlimit`` ((name,
+    value) set in the child) or ``gone_cwd`` (started in a folder deleted under it)."""
     import resource
 
-    cmd, cwd = [sys.executable, "-m", "markerplace.cli", *argv], w
+    cmd, cwd = [*run.get("prefix", []), sys.executable, "-m", "markerplace.cli", *argv], w
     if run.get("gone_cwd"):
         gone = w / "gone"
         gone.mkdir(exist_ok=True)
         cmd = ["sh", "-c", f"cd '{gone}' && rmdir '{gone}' && exec \"$0\" \"$@\"", *cmd]
     limit = run.get("rlimit")
     pre = (lambda: resource.setrlimit(getattr(resource, limit[0]), (limit[1], limit[1]))) if limit else None
-    stdout = open(run["stdout"], "w") if run.get("stdout") else None
+    if run.get("stdout_closed"):
+        pre = lambda: os.close(1)  # noqa: E731
+    stdout, spare = (open(run["stdout"], "w") if run.get("stdout") else None), None
+    if run.get("stdout_broken"):
+        spare, write_end = os.pipe()
+        os.close(spare)  # nobody reads: the first write fails with EPIPE
+        stdout = os.fdopen(write_end, "w")
     t0 = time.perf_counter()
     try:
         res = subprocess.run(cmd, stdout=stdout or subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=cwd,
@@ -639,6 +989,8 @@ def judge(case: Case, code: int, err: str, seconds: float) -> str | None:
         return "traceback"
     noise = case.extra.get("native_noise")  # a native library's own lines (OpenBLAS under ulimit -v)
     lines = [ln for ln in err.strip().splitlines() if ln.strip() and not (noise and ln.startswith(noise))]
+    if case.expect == "sigpipe":  # a reader that stopped reading: quiet, exit 141 as a shell tool
+        return None if code == 141 and not lines else f"exit {code} with {len(lines)} stderr lines, expected 141, quiet"
     if case.expect == "error":
         if code != 2:
             return f"exit {code}, expected 2"
@@ -653,14 +1005,63 @@ def judge(case: Case, code: int, err: str, seconds: float) -> str | None:
             return f"no warning with {case.text!r}"
     if case.extra.get("max_seconds") and seconds > case.extra["max_seconds"]:
         return f"took {seconds:.0f} s"
-    if case.check is not None and code == 0:
+    if case.check is not None and (code == 0 or getattr(case.check, "always", False)):
         return case.check()
     return None
 
 
 GROUPS = {"files": cases, "checked": checked_input_cases, "interrupts": interrupt_cases, "folders": folder_cases,
-          "issue50": issue50_cases}
+          "issue50": issue50_cases, "probe": probe_cases}
 """The groups of cases, in the order they run (``--group`` picks one)."""
+
+
+def run_case(case: Case, w: Path) -> tuple:
+    """Set ``case`` up, run it and judge it; prints its line and returns its row of the report
+    (name, expected, exit, seconds, problem or "", first message). Raises :class:`Skip` when its
+    setup cannot be made on this machine."""
+    if case.setup:
+        case.setup()
+    argv = case.argv
+    if case.extra.get("cluster"):
+        argv = [a.replace("{cluster}", _Cluster.address(w)) for a in argv]
+    prefix = without_root_powers([]) if case.extra.get("no_root") else []
+    if case.interrupt is not None:
+        wait_for, delay, sig = case.interrupt
+        r = interrupt_cli(argv, wait_for, delay=delay, sig=sig, cwd=w)
+        code, err, seconds = r.returncode, r.stderr, r.exit_s
+        problems = r.problems(expect_code=128 + sig)
+        problem = "; ".join(problems) if problems else None
+        first = next((ln for ln in err.strip().splitlines() if ln.startswith("markerplace:")), "")[:150]
+        verdict = "OK " if problem is None else "BAD"
+        print(f"{verdict} {case.name:<42} exit {code!s:>4} {seconds:5.1f} s  {problem or first}", flush=True)
+        return (case.name, case.expect, code, f"{seconds:.1f}", problem or "", first.replace("|", "/"))
+    if case.extra.get("concurrent"):
+        cmd = [sys.executable, "-m", "markerplace.cli", *argv]
+        t0 = time.perf_counter()
+        procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=w)
+                 for _ in range(case.extra["concurrent"])]
+        outs = [p.communicate(timeout=600) for p in procs]
+        codes, errs = [p.returncode for p in procs], [e for _, e in outs]
+        # one correct plan and clear refusals (one 'markerplace: error:' line each), or all correct
+        refusals_ok = all(c == 0 or (c == 2 and len(e.strip().splitlines()) == 1
+                                     and e.startswith("markerplace: error:")) for c, e in zip(codes, errs))
+        code = 0 if 0 in codes and refusals_ok else max(codes)
+        err = "".join(errs)
+        seconds = time.perf_counter() - t0
+    elif prefix:
+        res = subprocess.run([*prefix, sys.executable, "-m", "markerplace.cli", *argv], capture_output=True,
+                             text=True, cwd=w, timeout=600)
+        code, err, seconds = res.returncode, res.stderr, 0.0
+    elif case.extra.get("run"):
+        code, err, seconds = run_cli(argv, w, case.extra["run"])
+    else:
+        code, _, err, seconds = cli(argv, w)
+    LAST_STDERR[0] = err
+    problem = judge(case, code, err, seconds)
+    first = next((ln for ln in err.strip().splitlines() if "error:" in ln or "WARNING" in ln), "")[:150]
+    verdict = "OK " if problem is None else "BAD"
+    print(f"{verdict} {case.name:<42} exit {code:>3} {seconds:5.1f} s  {problem or first}", flush=True)
+    return (case.name, case.expect, code, f"{seconds:.1f}", problem or "", first.replace("|", "/"))
 
 
 def main() -> int:
@@ -680,61 +1081,30 @@ def main() -> int:
     f = make_fixtures(w)
     servers = [LoopbackServer(garbage=False), LoopbackServer(garbage=True)]
     f["silent"], f["garbage"] = servers[0].address, servers[1].address
-    rows, bad = [], 0
+    rows, bad, skipped = [], 0, 0
     every = [case for name, group in GROUPS.items() if args.group in (None, name) for case in group(w, f)]
-    for case in every:
-        if args.only and args.only not in case.name:
-            continue
-        if case.setup:
-            case.setup()
-        argv = case.argv
-        prefix = without_root_powers([]) if case.extra.get("no_root") else []
-        if case.interrupt is not None:
-            wait_for, delay, sig = case.interrupt
-            r = interrupt_cli(argv, wait_for, delay=delay, sig=sig, cwd=w)
-            code, err, seconds = r.returncode, r.stderr, r.exit_s
-            problems = r.problems(expect_code=128 + sig)
-            problem = "; ".join(problems) if problems else None
-            bad += problem is not None
-            first = next((ln for ln in err.strip().splitlines() if ln.startswith("markerplace:")), "")[:150]
-            verdict = "OK " if problem is None else "BAD"
-            print(f"{verdict} {case.name:<42} exit {code!s:>4} {seconds:5.1f} s  {problem or first}", flush=True)
-            rows.append((case.name, case.expect, code, f"{seconds:.1f}", problem or "", first.replace("|", "/")))
-            continue
-        if case.extra.get("concurrent"):
-            cmd = [sys.executable, "-m", "markerplace.cli", *argv]
-            t0 = time.perf_counter()
-            procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=w)
-                     for _ in range(case.extra["concurrent"])]
-            outs = [p.communicate(timeout=600) for p in procs]
-            codes, errs = [p.returncode for p in procs], [e for _, e in outs]
-            # one correct plan and clear refusals (one 'markerplace: error:' line each), or all correct
-            refusals_ok = all(c == 0 or (c == 2 and len(e.strip().splitlines()) == 1
-                                         and e.startswith("markerplace: error:")) for c, e in zip(codes, errs))
-            code = 0 if 0 in codes and refusals_ok else max(codes)
-            err = "".join(errs)
-            seconds = time.perf_counter() - t0
-        elif prefix:
-            res = subprocess.run([*prefix, sys.executable, "-m", "markerplace.cli", *argv], capture_output=True,
-                                 text=True, cwd=w, timeout=600)
-            code, err, seconds = res.returncode, res.stderr, 0.0
-        elif case.extra.get("run"):
-            code, err, seconds = run_cli(argv, w, case.extra["run"])
-        else:
-            code, _, err, seconds = cli(argv, w)
-        LAST_STDERR[0] = err
-        problem = judge(case, code, err, seconds)
-        bad += problem is not None
-        first = next((ln for ln in err.strip().splitlines() if "error:" in ln or "WARNING" in ln), "")[:150]
-        verdict = "OK " if problem is None else "BAD"
-        print(f"{verdict} {case.name:<42} exit {code:>3} {seconds:5.1f} s  {problem or first}", flush=True)
-        rows.append((case.name, case.expect, code, f"{seconds:.1f}", problem or "", first.replace("|", "/")))
-    for server in servers:
-        server.close()
+    try:
+        for case in every:
+            if args.only and args.only not in case.name:
+                continue
+            try:
+                row = run_case(case, w)
+            except Skip as why:
+                skipped += 1
+                print(f"SKIP {case.name:<41} {why}", flush=True)
+                rows.append((case.name, case.expect, "-", "-", f"skipped: {why}", ""))
+                continue
+            bad += bool(row[4])
+            rows.append(row)
+    finally:
+        for server in servers:
+            server.close()
+        _Mounts.release()
+        _Cluster.release()
     ro = w / "read_only"
     for p in (ro / "plan", ro):
         p.chmod(0o755)
-    summary = f"{len(rows)} cases, {bad} bad, {time.perf_counter() - t_all:.0f} s"
+    summary = f"{len(rows)} cases, {bad} bad, {skipped} skipped, {time.perf_counter() - t_all:.0f} s"
     print(summary)
     lines = ["| case | expected | exit | s | problem | stderr |", "|---|---|---|---|---|---|"]
     lines += [f"| {' | '.join(str(x) for x in r)} |" for r in rows]

@@ -37,6 +37,7 @@ from typing import Any
 from markerplace.errors import UserError
 from markerplace.settings import NO_CONST, Leaf, apply, walk
 from markerplace.jsonfile import MAX_JSON_DEPTH, read_json
+from markerplace.runtime.run_lock import odd_entry
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,9 @@ def read_config_file(path: str | Path, base: Any) -> Any:
     what = f"--config {path}"
     if path.suffix.lower() == ".toml":
         if not path.is_file():
-            raise UserError(f"{what}: no such file: give a TOML file or a plan's config.json")
+            odd = odd_entry(path.resolve()) if path.exists() else None  # a folder or a FIFO named x.toml
+            raise UserError(f"{what} is {odd}, not a settings file: give a TOML file or a plan's config.json" if odd
+                            else f"{what}: no such file: give a TOML file or a plan's config.json")
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:

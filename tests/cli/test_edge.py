@@ -84,3 +84,18 @@ def test_resource_errors_anywhere_in_a_command_are_one_line(error, needle, monke
 def test_other_errors_are_not_disguised():
     assert resource_error(OSError(errno.EIO, "Input/output error"), False) is None
     assert resource_error(ImportError("No module named x"), False) is None
+
+
+def test_an_out_path_with_a_name_too_long_for_the_file_system_is_one_line(tmp_path, capsys):
+    out = tmp_path / ("x" * 300)
+    assert cli_main.main(["plan", "tiny", "-k", "2", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("markerplace: error: ") and err.count("\n") == 1 and "File name too long" in err, err
+    assert "give a shorter path" in err and list(tmp_path.iterdir()) == []
+
+
+def test_a_closed_stdout_is_one_line():
+    res = subprocess.run([sys.executable, "-m", "markerplace.cli", "--version"], stderr=subprocess.PIPE, text=True,
+                         env=ENV, timeout=300, preexec_fn=lambda: os.close(1))  # the shell's `>&-`
+    assert "Traceback" not in res.stderr
+    _one_line(res, "cannot write to standard output: it is closed")

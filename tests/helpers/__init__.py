@@ -41,3 +41,18 @@ def negative_zeros(text: str) -> list[str]:
     temporary folder such as ``pytest-of-user/pytest-0/`` (pytest's first run on a machine) is
     no match."""
     return [t for t in _TOKEN_SEPARATORS.split(text) if _NEGATIVE_ZERO.fullmatch(t)]
+
+
+def undeclared_outputs(folder: Path, patterns) -> list[str]:
+    """The files a run wrote into its run folder ``folder`` (its manifest says) that none of
+    ``patterns`` declares (``fnmatch`` patterns, ``/`` at the end: everything below that folder;
+    see :mod:`markerplace.runtime.claims`): a new output must be declared to be checked before
+    any work in an adopted folder."""
+    import fnmatch
+    import json
+
+    from markerplace.runtime.run_folder import MANIFEST
+
+    written = {json.loads(line)[1] for line in (folder / MANIFEST).read_text().splitlines()}
+    return sorted(rel for rel in written if (folder / rel).is_file() and not any(
+        fnmatch.fnmatchcase(rel, p) or p.endswith("/") and rel.startswith(p) for p in patterns))

@@ -6,11 +6,13 @@ import json
 import numpy as np
 import pytest
 
+from helpers import undeclared_outputs
 from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
 from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import marker_points, markers_in_view
 from markerplace.markers import Marker
+from markerplace.pipelines.evaluate import EVALUATE_OUTPUTS
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
 from markerplace.testbed import marker_sets as placements
@@ -181,6 +183,7 @@ def test_evaluate_tiny_end_to_end_and_resume(tmp_path, capsys):
     out = tmp_path / "eval"
     args = ["evaluate", "tiny", "--out", str(out), "--tests", "20", "--k", "2", "--runs", "1", *FAST]
     assert main(args) == 0
+    assert undeclared_outputs(out, EVALUATE_OUTPUTS) == []  # what --adopt checks before any work
     printed = capsys.readouterr().out  # the printed summary carries the paired intervals
     assert "Paired differences, `weighted` test set, 5cm/5deg" in printed and "| Ours | Rand. (1 run) |" in printed
     for name in ("recall.csv", "tables.md", "recall_vs_k.png", "query_errors.npz", "timings.json", "config.json",

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import csv
 
+from helpers import undeclared_outputs
 from markerplace.cli.main import main
+from markerplace.pipelines.study import study_outputs
 
 SMALL = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "1", "--quiet"]
 
@@ -30,6 +32,8 @@ def test_study_tiny_writes_every_group_with_paired_differences(tmp_path, capsys)
     assert (out / "work" / "plan" / "observations").is_dir() and not (out / "runs" / "default" / "plan").exists()
     assert sorted(p.name for p in (out / "runs").iterdir()) == ["default", "no-detection", "shift-0.25", "size-0.5"]
     assert "# Parameter and sensitivity study" in capsys.readouterr().out
+    outputs = study_outputs(["default", "no-detection", "shift-0.25", "size-0.5"])
+    assert undeclared_outputs(out, outputs) == []  # what --adopt checks before any work
 
 
 def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_path):

@@ -54,3 +54,21 @@ def test_check_refuses_a_foreign_output_in_its_adopted_out_before_any_work(run_p
         if not os.path.isdir(plan / rel):
             assert any(fnmatch.fnmatchcase(rel, p) or p.endswith("/") and rel.startswith(p) for p in PLAN_OUTPUTS), rel
     assert any(fnmatch.fnmatchcase("check_map.png", p) for p in CHECK_OUTPUTS)
+
+
+@pytest.mark.parametrize("command, name", [("evaluate", "recall.csv"), ("evaluate", "plan/similarity.npz"),
+                                           ("evaluate", "report.html"), ("study", "study.md"),
+                                           ("study", "runs/default/tables.md"), ("study", "runs")])
+def test_evaluate_and_study_refuse_a_foreign_output_in_their_adopted_out_before_any_work(command, name, tmp_path,
+                                                                                        capsys):
+    out = tmp_path / "theirs"
+    (out / name).parent.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text("the user's own")  # "runs": a file where study makes a folder
+    before = _snapshot(out)
+    t0 = time.perf_counter()
+    assert main([command, "tiny", "--out", str(out), "--adopt", "--k", "2", "--tests", "10", *FAST]) == 2
+    seconds = time.perf_counter() - t0
+    err = capsys.readouterr().err
+    assert err.startswith("markerplace: error: ") and err.count("\n") == 1 and name in err, err
+    assert "checked before any work" in err and seconds < 5.0
+    assert _snapshot(out) == before

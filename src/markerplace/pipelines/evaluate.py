@@ -44,6 +44,7 @@ from markerplace.plan.place.predicted import RECALL_MODEL
 from markerplace.plan.where import Where
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
+from markerplace.runtime.claims import refuse_foreign
 from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
@@ -63,7 +64,20 @@ from markerplace.testbed.reporting.summary import write_outputs
 
 log = logging.getLogger(__name__)
 
-__all__ = ["EvaluationResult", "RunInputs", "evaluate", "open_evaluation_folder", "run_evaluation"]
+__all__ = ["EvaluationResult", "RunInputs", "evaluate", "open_evaluation_folder", "run_evaluation",
+           "EVALUATE_OUTPUTS", "RUN_OUTPUTS", "STAGE_OUTPUTS"]
+
+RUN_OUTPUTS = ("recall.csv", "query_errors.npz", "predicted.csv", "tables.md", "recall_vs_k.png", "config.json",
+               "ceiling.md", "calibration.md", "map_outcomes.npz", "calibration.png", "timings.json",
+               "test_poses_*.npz*", "report.html")
+"""What :func:`run_evaluation` writes at the top of its folder (``fnmatch`` patterns, see
+:data:`markerplace.pipelines.plan.PLAN_OUTPUTS`)."""
+STAGE_OUTPUTS = ("discretization.npz*", "observations/*.npy", "observations.meta.json", "similarity.npz*",
+                 "calibration/", "success_model_*.json*")
+"""The plan stages an evaluation computes into its work folder's ``plan/``."""
+EVALUATE_OUTPUTS = (*RUN_OUTPUTS, "plan/", "cache/", *(f"plan/{p}" for p in STAGE_OUTPUTS))
+"""What ``evaluate`` writes into its ``--out`` folder, checked in an adopted folder before any
+work (:func:`markerplace.runtime.claims.refuse_foreign`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,11 +203,13 @@ class RunInputs:
 
 
 def open_evaluation_folder(command: str, out: str | Path, scene_spec, plan_config, config, inputs: RunInputs,
-                           extra_runs: int = 0):
-    """Open ``out`` as the run folder of ``command`` (marked, locked), check that a ``--cluster``
+                           extra_runs: int = 0, outputs: tuple[str, ...] = EVALUATE_OUTPUTS):
+    """Open ``out`` as the run folder of ``command`` (marked, locked), refuse a foreign file named
+    like one of its ``outputs`` (patterns, in an adopted folder), check that a ``--cluster``
     answers and the run-size guard's first guess (``extra_runs`` more placements); returns
     ``plan_config`` with ``--start`` in the scene's internal frame."""
     run_folder.open_run_folder(out, command, adopt=inputs.adopt)
+    refuse_foreign(out, outputs)  # before any work, not when the output is written at the end
     if plan_config.runtime.cluster:
         check_scheduler(plan_config.runtime.cluster)
     return check_first_guess(plan_config, scene_spec.load(), inputs.force, config, extra_runs)

@@ -31,7 +31,8 @@ from markerplace.runtime.atomic_io import atomic_path
 from markerplace.settings import setting
 from markerplace.validation import parse_float_list
 from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
-from markerplace.pipelines.evaluate import RunInputs, open_evaluation_folder, run_evaluation
+from markerplace.pipelines.evaluate import (RUN_OUTPUTS, STAGE_OUTPUTS, RunInputs, open_evaluation_folder,
+                                            run_evaluation)
 from markerplace.pipelines.plan import prepare
 from markerplace.plan.config import validate
 from markerplace.plan.place.stage import place
@@ -41,7 +42,7 @@ from markerplace.testbed.reporting.paired import bootstrap_difference, format_di
 
 log = logging.getLogger(__name__)
 
-__all__ = ["StudyPlan", "study", "study_runs", "run_study"]
+__all__ = ["StudyPlan", "study", "study_outputs", "study_runs", "run_study"]
 
 
 def _float_list(name: str):
@@ -146,8 +147,17 @@ def study(scene_spec, plan_config, config, plan: StudyPlan, out_dir: str | Path,
     validate(plan_config)
     runs = 1 + len(plan.shifts) + len(plan.scales) + int(plan.detection_off)
     run_config = open_evaluation_folder("study", out_dir, scene_spec, plan_config, config, inputs,
-                                        runs * len(config.study.ks))
+                                        runs * len(config.study.ks), study_outputs(study_runs(config, plan)))
     return run_study(scene_spec, run_config, config, out_dir, plan, progress=inputs.progress)
+
+
+def study_outputs(run_names) -> tuple[str, ...]:
+    """What ``study`` writes into its folder with the evaluations ``run_names`` (``fnmatch``
+    patterns, see :data:`markerplace.pipelines.evaluate.EVALUATE_OUTPUTS`), checked in an
+    adopted folder before any work."""
+    return ("study.csv", "study.md", "study_*.png", "runs/", "work/", "work/plan/", "work/cache/",
+            *(f"work/plan/{p}" for p in STAGE_OUTPUTS),
+            *(f"runs/{name}/{p}" for name in run_names for p in ("", *RUN_OUTPUTS)))
 
 
 def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyPlan = StudyPlan(),
