@@ -86,6 +86,17 @@ def test_plan_with_map_then_evaluate_plan_renders_no_map_image(run_plan, tmp_pat
     assert _map_renders(calls, out / "plan" / "discretization.npz") == 0 and len(calls) > 0  # test images only
 
 
+def test_plan_made_with_map_then_evaluate_plan_observes_nothing(tmp_path, monkeypatch):
+    """plan --with-map observes per pose (its renders also give the map); evaluate --plan then
+    reuses those observations although the plan's settings ask for location views."""
+    plan = tmp_path / "plan"
+    assert main(["plan", "tiny", "-k", "2", "--out", str(plan), *FAST_2_YAWS, "--with-map"]) == 0
+    calls = _count_renders(monkeypatch)
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--plan", str(plan), "--out", str(out), *EVAL, *RUN]) == 0
+    assert _map_renders(calls, out / "plan" / "discretization.npz") == 0 and len(calls) > 0  # test images only
+
+
 def test_in_view_columns_are_read_only_for_the_markers_observe_sampled():
     rng = np.random.default_rng(0)
     poses = np.tile(np.eye(4), (3, 1, 1))

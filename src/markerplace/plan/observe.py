@@ -222,7 +222,8 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
     discretization (its key and file digest), the imaging settings, the tag drawing and the
     marker poses and sizes are unchanged; an interrupted stage resumes from its parts. When it
     must run and also write the map features, it observes per pose (``observe_views`` ``pose``,
-    and so keyed): those renders serve both.
+    and so keyed): those renders serve both; and observations made so (``plan --with-map``) are
+    reused by a later run with the map (``evaluate --plan``).
 
     Args:
         world_from_cam: (N, 4, 4) the discretization's camera poses.
@@ -242,12 +243,14 @@ def run_observe(scene_spec, world_from_cam: np.ndarray, disc_key: str, marker_po
                              config, marker_poses, sizes)
 
     key = key_of(config)
-    if map_output is not None and config.observe_views != "pose" and not cache.is_fresh(run_dir / "observations", key) \
-            and not cache.is_fresh(map_output.folder, map_output.key):
+    if map_output is not None and config.observe_views != "pose" and not cache.is_fresh(run_dir / "observations", key):
         # one render per pose gives both the observations and the map images (which must be
-        # the renders of their poses): cheaper than faces plus a second pass for the map
-        config = replace(config, observe_views="pose")
-        key = key_of(config)
+        # the renders of their poses): cheaper than faces plus a second pass for the map; and
+        # observations a run with the map made per pose (plan --with-map) are the ones to reuse
+        per_pose = replace(config, observe_views="pose")
+        if cache.is_fresh(run_dir / "observations", key_of(per_pose)) or not cache.is_fresh(map_output.folder,
+                                                                                              map_output.key):
+            config, key = per_pose, key_of(per_pose)
 
     def compute() -> FeatureSet:
         log.info("observe: rendering and extracting SIFT at %d poses", len(world_from_cam))
