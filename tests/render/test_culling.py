@@ -12,21 +12,10 @@ from markerplace.render.culling import MIN_TRIANGLES, chunk_triangles, frustum_p
 from markerplace.render.gl_resources import FAR, NEAR
 from markerplace.render.renderer import Renderer
 from markerplace.scene.types import MeshPart, Scene
+from helpers.poses import look_at_pose
 
 ROOM = (6.0, 5.0, 2.7)
 CELLS = 80  # per face side: 6 faces x 2 x 80^2 = 76,800 triangles, more than MIN_TRIANGLES
-
-
-def look_at_pose(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """(4, 4) world_from_cam of an OpenCV camera (x right, y down, z forward) at ``eye`` looking
-    at ``target``, world z up."""
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    T[:3, 3] = eye
-    return T
 
 
 def _grid(origin, u, v, n):

@@ -12,20 +12,9 @@ from markerplace.geometry import Intrinsics, world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.render.culling import MIN_TRIANGLES
 from markerplace.render.renderer import Renderer
+from helpers.poses import look_at_pose
 
 K = Intrinsics.from_fov(200, 150, 75.0)
-
-
-def look_at_pose(eye, target) -> np.ndarray:
-    """(4, 4) world_from_cam of an OpenCV camera at ``eye`` looking at ``target``, world z up."""
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    T[:3, 3] = eye
-    return T
 
 
 POSES = [look_at_pose((1.5, 1.2, 1.5), t) for t in [(5.9, 2.5, 1.4), (2.5, 4.9, 0.5), (0.1, 0.2, 2.2), (3.0, 2.5, 0.0)]]
