@@ -14,7 +14,8 @@ from PIL import Image
 
 from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics, project
-from markerplace.scan.frames import FrameWriter, open_frameset
+from markerplace.scan.frames import FrameWriter, load_frame, open_frameset
+from markerplace.scan.fuse import read_ahead
 from markerplace.scan.frameset import rotation_from_quaternion
 from markerplace.scan.tum import associate, nearest, read_tum
 from markerplace.scan.simulate import distance_to_scene
@@ -138,6 +139,19 @@ def _write_tum(root: Path, with_intrinsics: bool = True) -> dict:
     if with_intrinsics:
         (root / "cam.json").write_text(json.dumps({"width": 64, "height": 48, "fx": 50, "fy": 50, "cx": 31.5, "cy": 23.5}))
     return {"names": ["1.000000", "1.033000"], "pose1_t": np.array([0.2, -0.1, 0.5])}
+
+
+@pytest.mark.parametrize("count", [0, 2, 7])
+def test_read_ahead_gives_every_frame_in_order(tiny_frames, count):
+    """Frames read on a thread ahead of the fusion are the frames a plain loop reads, in order
+    (fewer frames than the read-ahead, and more)."""
+    fs = open_frameset(tiny_frames[0])
+    records = fs.frames[:count]
+    got = list(read_ahead(fs, records, ahead=4))
+    assert len(got) == count
+    for (rgb, depth), rec in zip(got, records):
+        want_rgb, want_depth = load_frame(fs, rec)
+        assert np.array_equal(rgb, want_rgb) and np.array_equal(depth, want_depth)
 
 
 def test_tum_association_matches_associate_py():

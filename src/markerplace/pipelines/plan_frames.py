@@ -171,7 +171,7 @@ def prepare_frames(fs: FrameSet, frame_indices: np.ndarray, config: PlanConfig, 
     sizes = [tag_size] * C
     in_view = geometric_visibility(disc.world_from_cam, marker_poses, config.imaging.camera, config.noise.max_range)
     obs, obs_key = run_frame_observe(fs, idx, disc.world_from_cam, fkey, marker_poses, sizes, config.imaging,
-                                     run_dir, timings, progress)
+                                     run_dir, timings, progress, config.runtime)
     n_similar = run_similarity(obs.descriptors, obs.points_world, obs_key, run_dir, config.similarity,
                                config.placement.similarity, timings, progress)
     return score_poses(disc, obs, n_similar, marker_poses, sizes, in_view, 0, config.placement.marker_model,

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -37,6 +39,9 @@ from markerplace.scan.frameset import FrameSet, frame_intrinsics
 from markerplace.scan.up import MESH_REFINE_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_mesh, world_from_input
 
 log = logging.getLogger(__name__)
+
+READ_AHEAD = 4
+"""Frames :func:`read_ahead` decodes ahead of the one being integrated."""
 
 
 @dataclass(frozen=True)
@@ -225,6 +230,20 @@ def canonical_mesh(mesh):
     return out
 
 
+def read_ahead(fs, records, ahead: int = READ_AHEAD):
+    """Yield :func:`~markerplace.scan.frames.load_frame` of each record in order, reading up to
+    ``ahead`` frames ahead on one thread (decoding releases the GIL, so reading overlaps the
+    integration; the frames and their order are those of a plain loop)."""
+    records = list(records)
+    with ThreadPoolExecutor(1) as pool:
+        pending = deque(pool.submit(load_frame, fs, rec) for rec in records[:ahead])
+        for nxt in records[ahead:] + [None] * min(ahead, len(records)):
+            frame = pending.popleft().result()
+            if nxt is not None:
+                pending.append(pool.submit(load_frame, fs, nxt))
+            yield frame
+
+
 def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     """Fuse every ``config.every``-th frame of a :class:`~markerplace.scan.frameset.FrameSet`.
 
@@ -245,10 +264,8 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
     fusion = TSDFFusion(fs.intrinsics, config)
     t0 = time.perf_counter()
     empty = 0
-    for rec in track(frames, "fuse", "frame", progress):
-        if rec.depth_path is None:
-            continue
-        rgb, depth = load_frame(fs, rec)
+    with_depth = [rec for rec in frames if rec.depth_path is not None]
+    for rec, (rgb, depth) in zip(track(with_depth, "fuse", "frame", progress), read_ahead(fs, with_depth)):
         if not fusion.integrate(rgb, depth, fs.depth_scale, rec.world_from_cam, frame_intrinsics(fs, rec)):
             empty += 1
     if empty == len(frames) - no_depth:

@@ -9,7 +9,9 @@ hiding it: sensors lose dark, shiny and far surfaces, and a hole is rarely somet
 
 Written as a :class:`~markerplace.imaging.features.FeatureSet` folder ``observations/`` in the
 run folder, frame by frame in parts (an interrupted run resumes), cached under the hash of the
-frames, the candidates and the imaging settings.
+frames, the candidates and the imaging settings. The frames are read and looked at on the
+executor (:mod:`markerplace.runtime.executor`: ``--workers`` processes or a Dask cluster), one
+task per frame; the result of a frame does not depend on where it ran.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from markerplace.imaging.visibility import marker_points, markers_unoccluded
 from markerplace.localization.features import extract_sift, lift_to_3d
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
+from markerplace.runtime.executor import RuntimeConfig, WorkerJob, make_executor
 from markerplace.runtime.stages import cached
 from markerplace.scan.frames import load_frame
 
@@ -47,9 +50,22 @@ def frame_features(rgb: np.ndarray, depth_m: np.ndarray, world_from_cam: np.ndar
                          pts[valid].astype(np.float32), extras={"candidate_unoccluded": unocc})
 
 
+def _frame_state(spec: tuple):
+    """A worker's state: (the frame set, (C, 5, 3) candidate samples, ImagingConfig), as given."""
+    return spec
+
+
+def _frame_task(state: tuple, item: tuple) -> ImageFeatures:
+    """One frame's observation on a worker: ``item`` = (frame index, (4, 4) world_from_cam)."""
+    fs, samples, config = state
+    index, world_from_cam = item
+    rgb, depth = load_frame(fs, fs.frames[int(index)])
+    return frame_features(rgb, depth.astype(np.float32) / float(fs.depth_scale), world_from_cam, samples, config)
+
+
 def run_frame_observe(fs, indices: np.ndarray, world_from_cam: np.ndarray, frames_key: str, marker_poses: np.ndarray,
                       sizes, config: ImagingConfig, run_dir: Path, timings: dict,
-                      progress: bool = True) -> tuple[FeatureSet, str]:
+                      progress: bool = True, runtime: RuntimeConfig = RuntimeConfig()) -> tuple[FeatureSet, str]:
     """The observe stage of a frames plan: ``run_dir/observations/`` (module docstring).
 
     Args:
@@ -57,6 +73,7 @@ def run_frame_observe(fs, indices: np.ndarray, world_from_cam: np.ndarray, frame
             poses in the surface's internal frame; ``frames_key`` their identity
             (:func:`~markerplace.plan.frames.surface.frames_key`).
         marker_poses: (C, 4, 4) candidates; ``sizes`` (C,) or one black-square edge, metres.
+        runtime: where the frames are looked at (never changes the result).
 
     Returns:
         (the features, the stage's cache key).
@@ -72,13 +89,13 @@ def run_frame_observe(fs, indices: np.ndarray, world_from_cam: np.ndarray, frame
         done = writer.done()
         if done:
             log.info("observe: resuming, %d of %d frames already done", len(done), N)
-        with progress_bar(N, "observe (frames)", "frame", progress, initial=len(done)) as bar:
-            for j, i in enumerate(indices):
-                if j in done:
-                    continue
-                rgb, depth = load_frame(fs, fs.frames[int(i)])
-                writer.add(j, frame_features(rgb, depth.astype(np.float32) / float(fs.depth_scale), world_from_cam[j],
-                                             samples, config))
+        todo = [j for j in range(N) if j not in done]
+        job = WorkerJob(_frame_state, (fs, samples, config), cache.hash_of("frames-observe-worker", key))
+        items = [(int(indices[j]), np.asarray(world_from_cam[j], float)) for j in todo]
+        with make_executor(runtime) as executor, \
+                progress_bar(N, "observe (frames)", "frame", progress, initial=len(done)) as bar:
+            for t, feats in executor.map(_frame_task, items, job):
+                writer.add(todo[t], feats)
                 bar.update()
         return writer.finish()
 
