@@ -3,7 +3,13 @@ then time the observe stage's steps per pose.
 
 Prints ``name: value`` lines.
 
-* the model: ``--scene house-scan`` (default) is ``scene export house --as-scan`` (a fused
+* the model: ``--frames DIR`` profiles ``plan --frames DIR`` instead (a real RGB-D sequence: the
+  surface fused from the frames, the frames' own images looked at, no rendering; e.g. the
+  7-Scenes kitchen of ``scripts/prepare_kitchen.sh``, ``--plan-args`` for its tag size); its
+  stage windows are ``setup``, ``fuse``, ``discretize``, ``observe``, ``similarity``,
+  ``score_place`` and ``deliverables``, and per frame: reading the images, SIFT, lifting, the
+  candidate occlusion test, transfer and bookkeeping.
+* else the model: ``--scene house-scan`` (default) is ``scene export house --as-scan`` (a fused
   simulated scan of the built-in two-storey house, cached in ``--work`` as
   benchmarks/run_estimate.py does), planned with ``--up z``; ``--scene campus`` is the built-in
   2,064 m^2 campus, planned with ``--level 0`` (extra ``plan`` arguments: ``--plan-args``, e.g.
@@ -33,6 +39,8 @@ Prints ``name: value`` lines.
 
     .venv/bin/python benchmarks/plan_profile.py [--scene house-scan|campus] [--work out/bench_plan_profile]
         [--sample 60] [--workers 2] [-k 10]
+    .venv/bin/python benchmarks/plan_profile.py --frames runs/kitchen/frames -k 4 \
+        --plan-args="--tag-size 0.16 --marker-spacing 0.5"
 """
 
 from __future__ import annotations
@@ -59,6 +67,11 @@ from scan_plan import emit
 
 AREA_GOAL = 200.0
 STAGES = ("setup", "discretize", "size_check", "observe", "similarity", "score", "place", "deliverables")
+FRAMES_WINDOWS = (("setup", r"plan --frames: \d+ of \d+ frames"), ("fuse", r"fused \d+ frames|fuse: reusing"),
+                  ("discretize", r"frames: \d+ of \d+ frames .* candidate tag spots"),
+                  ("observe", r"observe: \d+ features with 3D points"), ("similarity", r"similarity \(\w+\): \d+ points"),
+                  ("score_place", r": placed \d+ markers \("), ("deliverables", None))
+"""Stage windows of a frames plan: (name, the log line that ends it; None: the process exit)."""
 
 
 def scene_args(args, work: Path) -> tuple[list[str], str, str | None]:
@@ -143,8 +156,8 @@ def first(lines: list[tuple[float, str]], pattern: str, after: float = 0.0) -> t
     return None
 
 
-def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str]]:
-    """Run ``plan`` into ``out`` and print per stage wall s, CPU s and peak RSS; returns the log lines."""
+def run_plan(args, plan_scene: list[str], out: Path):
+    """Run ``plan`` into ``out`` with its process tree sampled: (log lines, sampler, t0, t_end, CPU s)."""
     exe = markerplace_exe()
     shutil.rmtree(out, ignore_errors=True)
     cmd = [exe, "plan", *plan_scene, *args.plan_args.split(), "-k", str(args.k), "--out", str(out),
@@ -167,6 +180,29 @@ def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str
     if proc.returncode != 0:
         print("\n".join(s for _, s in lines[-30:]), file=sys.stderr)
         raise SystemExit(f"plan failed ({proc.returncode})")
+    return lines, sampler, t0, t_end, cpu_total
+
+
+def emit_windows(win: dict, sampler: TreeSampler, cpu_total: float, lines, t0: float, t_end: float) -> None:
+    """Per stage window (name -> (t0, t1)): wall, CPU, system and peak RSS; then the totals."""
+    cpu_before_end = sampler.samples[-1][2] if sampler.samples else 0.0
+    for name, (a, b) in win.items():
+        cpu, rss = sampler.window(a, b, end_cpu=cpu_total if name == "deliverables" else None)
+        emit(f"stage.{name}.wall_s", b - a)
+        emit(f"stage.{name}.cpu_s", cpu)
+        emit(f"stage.{name}.system_s", sampler.system_window(a, b))
+        emit(f"stage.{name}.peak_rss_mib", rss)
+    emit("stage.logged_seconds", first(lines, r"stage seconds:")[1].string.split("stage seconds: ")[-1])
+    emit("plan.wall_s", t_end - t0)
+    emit("plan.cpu_s", cpu_total)
+    emit("plan.system_s", sampler.system[-1] if sampler.system else float("nan"))
+    emit("plan.cpu_s_sampled_before_exit", cpu_before_end)
+    emit("plan.peak_rss_mib", max((m for _, m, _ in sampler.samples), default=float("nan")))
+
+
+def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str]]:
+    """Run ``plan`` into ``out`` and print per stage wall s, CPU s and peak RSS; returns the log lines."""
+    lines, sampler, t0, t_end, cpu_total = run_plan(args, plan_scene, out)
     stage_s = dict((k, float(v)) for k, v in re.findall(r"(\w+) (\d+\.\d+)", first(lines, r"stage seconds:")[1].string))
     t_disc_end = first(lines, r"discretize: .* yaws = \d+ poses")[0]
     t_obs0 = first(lines, r"observe: rendering")[0]
@@ -178,19 +214,25 @@ def plan_stages(args, plan_scene: list[str], out: Path) -> list[tuple[float, str
     win = {"setup": (t0, t_disc0), "discretize": (t_disc0, t_disc_end), "size_check": (t_disc_end, t_obs0),
            "observe": (t_obs0, t_obs1), "similarity": (t_obs1, t_sim1), "score": (t_sim1, t_score1),
            "place": (t_score1, t_place1), "deliverables": (t_place1, t_end)}
-    cpu_before_end = sampler.samples[-1][2] if sampler.samples else 0.0
-    for name in STAGES:
-        a, b = win[name]
-        cpu, rss = sampler.window(a, b, end_cpu=cpu_total if name == "deliverables" else None)
-        emit(f"stage.{name}.wall_s", b - a)
-        emit(f"stage.{name}.cpu_s", cpu)
-        emit(f"stage.{name}.system_s", sampler.system_window(a, b))
-        emit(f"stage.{name}.peak_rss_mib", rss)
-    emit("stage.logged_seconds", first(lines, r"stage seconds:")[1].string.split("stage seconds: ")[-1])
-    emit("plan.wall_s", t_end - t0)
-    emit("plan.cpu_s", cpu_total)
-    emit("plan.cpu_s_sampled_before_exit", cpu_before_end)
-    emit("plan.peak_rss_mib", max((m for _, m, _ in sampler.samples), default=float("nan")))
+    emit_windows(win, sampler, cpu_total, lines, t0, t_end)
+    return lines
+
+
+def frames_stages(args, out: Path) -> list[tuple[float, str]]:
+    """``plan --frames`` into ``out``: the :data:`FRAMES_WINDOWS` per stage; returns the log lines."""
+    lines, sampler, t0, t_end, cpu_total = run_plan(args, ["--frames", args.frames], out)
+    win, start = {}, t0
+    for name, pattern in FRAMES_WINDOWS:
+        hit = first(lines, pattern, start) if pattern else None
+        if pattern and hit is None:
+            raise SystemExit(f"no log line matches {pattern!r} (stage {name}); see {out.with_suffix('.log')}")
+        end = hit[0] if hit else t_end
+        win[name] = (start, end)
+        start = end
+    emit_windows(win, sampler, cpu_total, lines, t0, t_end)
+    poses = first(lines, r"frames: (\d+) of \d+ frames .* (\d+) candidate tag spots")
+    emit("poses", int(poses[1].group(1)))
+    emit("candidates", int(poses[1].group(2)))
     return lines
 
 
@@ -295,6 +337,67 @@ def per_pose(args, spec, up, out: Path) -> None:
     emit("per_pose.observe_one_core_s_all_poses", float(np.mean(total)) / 1000 * len(poses))
 
 
+def per_frame(args, out: Path) -> None:
+    """Time a frames plan's observe steps per frame on ``args.sample`` of the run's frames."""
+    import json
+
+    from markerplace.imaging.features import FeatureWriter, ImageFeatures
+    from markerplace.imaging.visibility import marker_points, markers_unoccluded
+    from markerplace.localization.features import extract_sift, lift_to_3d
+    from markerplace.pipelines.plan_frames import frames_config
+    from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.artifact import load as load_discretization
+    from markerplace.scan.frames import load_frame, open_frameset
+
+    written = json.loads((out / "config.json").read_text())
+    options = written["scene_options"]
+    fs = open_frameset(options["frames"], options["format"])
+    indices = np.asarray(options["frame_indices"], int)
+    disc = load_discretization(out / "discretization.npz")
+    pick = np.unique(np.linspace(0, len(indices) - 1, min(args.sample, len(indices))).astype(int))
+    cfg = frames_config(PlanConfig(), fs, indices).imaging
+    samples = marker_points(disc.candidate_world_from_marker, written["placement"]["tag_size"])
+    steps = ("read", "sift", "lift", "occlusion", "transfer", "bookkeeping")
+    t = {s: [] for s in steps}
+    recv, send = Pipe(duplex=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        writer = FeatureWriter(Path(tmp) / "obs", len(pick), "bench")
+        for j, i in enumerate(pick):
+            c0 = time.perf_counter()
+            rgb, depth = load_frame(fs, fs.frames[int(indices[i])])
+            depth_m = depth.astype(np.float32) / float(fs.depth_scale)
+            c1 = time.perf_counter()
+            kp, desc = extract_sift(rgb, cfg.sift)
+            c2 = time.perf_counter()
+            pts, valid = lift_to_3d(kp, depth_m, cfg.camera.K, disc.world_from_cam[i], max_depth=cfg.max_depth,
+                                    image_size=(rgb.shape[1], rgb.shape[0]))
+            c3 = time.perf_counter()
+            unocc = markers_unoccluded(depth_m, disc.world_from_cam[i], cfg.camera.K, samples, cfg.occlusion_tolerance)
+            c4 = time.perf_counter()
+            feats = ImageFeatures(kp[valid].astype(np.float32), np.clip(np.rint(desc[valid]), 0, 255).astype(np.uint8),
+                                  pts[valid].astype(np.float32), extras={"candidate_unoccluded": unocc})
+            c5 = time.perf_counter()
+            th = threading.Thread(target=_send, args=(send, [(j, feats)]))
+            th.start()
+            got = recv.recv()
+            th.join()
+            c6 = time.perf_counter()
+            writer.add(got[0][0], got[0][1])
+            c7 = time.perf_counter()
+            for s, dt in zip(steps, (c1 - c0, c2 - c1, c3 - c2, c4 - c3, c6 - c5, (c5 - c4) + (c7 - c6))):
+                t[s].append(1000 * dt)
+        writer.finish()
+    total = np.sum([t[s] for s in steps], axis=0)
+    emit("per_frame.frames_timed", len(pick))
+    for s in steps + ("total",):
+        v = np.asarray(total if s == "total" else t[s])
+        emit(f"per_frame.{s}.median_ms", float(np.median(v)))
+        emit(f"per_frame.{s}.mean_ms", float(np.mean(v)))
+        if s != "total":
+            emit(f"per_frame.{s}.share_of_mean", float(np.mean(v) / np.mean(total)))
+    emit("per_frame.observe_one_core_s_all_frames", float(np.mean(total)) / 1000 * len(indices))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="house-scan", help="house-scan (default), campus (--level 0) or a built-in name")
@@ -303,13 +406,20 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("-k", type=int, default=10)
     ap.add_argument("--period", type=float, default=0.25, help="process-tree sampling period, s")
+    ap.add_argument("--frames", default=None, help="profile plan --frames DIR (a real RGB-D sequence) instead")
     ap.add_argument("--plan-args", default="", help="extra plan arguments, e.g. --plan-args='--start 10,5'")
     args = ap.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
+    emit("cpus", os.cpu_count())
+    if args.frames:
+        emit("frames", args.frames)
+        out = work / "plan_frames"
+        frames_stages(args, out)
+        per_frame(args, out)
+        return 0
     plan_scene, spec, up = scene_args(args, work)
     emit("scene", args.scene)
-    emit("cpus", os.cpu_count())
     out = work / f"plan_{args.scene}"
     lines = plan_stages(args, plan_scene, out)
     area(lines, out)
