@@ -55,3 +55,25 @@ def check_page(driver, path: Path) -> dict:
     shot = screenshot(driver).mean(axis=2)
     assert shot.std() > 10.0, f"blank screenshot (std {shot.std():.1f})"
     return {"images": [alt for alt, *_ in images], "text": driver.find_element("tag name", "body").text}
+
+
+def view_call(driver, view_id: str, call: str):
+    """Scroll the 3D view ``view_id`` (report/view3d.py) to the top of the window and return
+    ``window.mpView3d[view_id].<call>`` (e.g. ``"projectedTags()"``)."""
+    driver.execute_script(f"document.getElementById('{view_id}').scrollIntoView({{block: 'start'}})")
+    return driver.execute_script(f"return window.mpView3d['{view_id}'].{call}")
+
+
+def click_tag(driver, view_id: str, kind: str, index: int) -> list[str]:
+    """Click tag ``index`` of ``kind`` (``planned`` or ``found``) of the 3D view where the current
+    camera shows it (asserts the view sees it there); returns the ids of the selected elements."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    t = [p for p in view_call(driver, view_id, "projectedTags()") if p["kind"] == kind and p["index"] == index][0]
+    assert t["visible"], t
+    canvas = driver.find_element("css selector", f"#{view_id} canvas")
+    r = driver.execute_script("var r = arguments[0].getBoundingClientRect(); return [r.left, r.top, r.width, r.height]",
+                              canvas)
+    ActionChains(driver).move_to_element_with_offset(canvas, int(round(t["x"] - r[0] - r[2] / 2)),
+                                                     int(round(t["y"] - r[1] - r[3] / 2))).click().perform()
+    return driver.execute_script("return Array.from(document.querySelectorAll('.mp-selected')).map(e => e.id)")

@@ -1,5 +1,5 @@
 """report.html of `plan` and `evaluate`, loaded in a real headless browser (:mod:`helpers.browser`;
-the `browser` fixture is in conftest.py), and the caption
+the `browser` fixture is in tests/conftest.py), and the caption
 maths (facing, wall, height above the local floor, distance along the wall to the nearest corner
 or door edge) on hand-built rooms."""
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from helpers import FAST_2_YAWS as FAST
-from helpers.browser import check_page
+from helpers.browser import check_page, click_tag, view_call
 from markerplace.cli.main import main
 from markerplace.report.captions import describe_tag, facing_label, wall_side
 from markerplace.testbed.reporting.page import gallery_selection
@@ -158,6 +158,22 @@ def test_plan_report_in_browser(tiny_plan, browser):
     assert re.search(r"\d\.\d\d m from the (corner|door edge|end of the wall) on the (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
     assert page["text"].count("On the wall (model part tiny/wall/") == 2  # what each tag is on
+
+
+def test_plan_report_3d_view_opens_a_card(tiny_plan, browser):
+    """The report's 3D view draws the plan's tags, numbered by placement order; a click on a tag
+    (the camera turned to it) selects and scrolls to its card."""
+    browser.get((tiny_plan / "report.html").resolve().as_uri())
+    view = "mp-view3d"
+    assert view_call(browser, view, "error") is None and view_call(browser, view, "frames") >= 1
+    tags = view_call(browser, view, "projectedTags()")
+    assert [(t["label"], t["card"]) for t in tags] == [("1", "tag1"), ("2", "tag2")]
+    for i in range(2):
+        view_call(browser, view, f"focusTag('planned', {i})")
+        assert click_tag(browser, view, "planned", i) == [f"tag{i + 1}"]
+        top, height = browser.execute_script(f"return [document.getElementById('tag{i + 1}').getBoundingClientRect()"
+                                             ".top, window.innerHeight]")
+        assert -2 <= top < height - 100  # scrolled to it
 
 
 def test_reject_buttons_download_a_file_that_plan_exclude_accepts(tiny_plan, browser, tmp_path, capsys):

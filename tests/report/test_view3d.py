@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from helpers.browser import screenshot
+from helpers.browser import click_tag, screenshot, view_call
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.report.html import write_page
@@ -64,8 +64,7 @@ def open_view(driver, path):
 
 
 def js(driver, call: str):
-    driver.execute_script(f"document.getElementById('{VIEW}').scrollIntoView({{block: 'start'}})")
-    return driver.execute_script(f"return window.mpView3d['{VIEW}'].{call}")
+    return view_call(driver, VIEW, call)
 
 
 def canvas_pixels(driver) -> np.ndarray:
@@ -94,20 +93,6 @@ def assert_tags_drawn_where_planned(driver, kinds):
             assert t["visible"]
     js(driver, "labels(true)")
     js(driver, "reset()")
-
-
-def click_tag(driver, kind, index):
-    """Click the tag's projected centre in the initial view; returns the selected cards' ids."""
-    from selenium.webdriver.common.action_chains import ActionChains
-
-    t = [p for p in js(driver, "projectedTags()") if p["kind"] == kind and p["index"] == index][0]
-    assert t["visible"], t
-    canvas = driver.find_element("css selector", f"#{VIEW} canvas")
-    r = driver.execute_script("var r = arguments[0].getBoundingClientRect(); return [r.left, r.top, r.width, r.height]",
-                              canvas)
-    ActionChains(driver).move_to_element_with_offset(canvas, int(round(t["x"] - r[0] - r[2] / 2)),
-                                                     int(round(t["y"] - r[1] - r[3] / 2))).click().perform()
-    return driver.execute_script("return Array.from(document.querySelectorAll('.mp-selected')).map(e => e.id)")
 
 
 # ---------------------------------------------------------------- the view's copy of the model
@@ -182,7 +167,7 @@ def test_room_view_draws_tags_where_planned_and_a_click_selects_the_card(room, b
     assert len(visible) >= 3, tags  # the initial view sees most tags over the near wall
     for kind, index in visible:
         card = f"tag{index + 1}" if kind == "planned" else f"found{index + 1}"
-        assert click_tag(driver, kind, index) == [card]
+        assert click_tag(driver, VIEW, kind, index) == [card]
         top = driver.execute_script(f"return document.getElementById('{card}').getBoundingClientRect().top")
         assert abs(top) < 2  # scrolled to the card
     labels = driver.execute_script(f"return Array.from(document.querySelectorAll('#{VIEW} .mp-label')).map(e => e.textContent)")
