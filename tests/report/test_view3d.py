@@ -202,3 +202,21 @@ def test_scan_like_model_stays_small_and_opens(browser, tmp_path):
     assert time.perf_counter() - t < 30 and api["frames"] >= 1
     assert js(browser, "triangles") <= 100_000
     assert_tags_drawn_where_planned(browser, {"planned": 2})
+
+
+@pytest.mark.slow
+def test_scan_of_the_house_is_under_20_mb_and_opens(browser, tmp_path):
+    """`scene export house --as-scan` (about 1.1 M faces; some 5 min to make): the report's view of
+    it stays under 20 MB, opens, and draws its tags where planned."""
+    from markerplace.cli.main import main
+    from markerplace.scene import load_scene
+
+    ply = tmp_path / "house_scan.ply"
+    assert main(["--quiet", "scene", "export", "house", str(ply), "--as-scan"]) == 0
+    scene = load_scene(str(ply), up="z")
+    assert scene.num_faces > 300_000
+    planned = wall_tags(scene, [(3.0, 2.0, 1.3, 90), (8.0, 2.0, 1.5, 0), (2.5, 2.0, 4.5, 180)])
+    path = view_page(tmp_path / "scan.html", scene, planned)
+    assert path.stat().st_size < 20e6
+    assert open_view(browser, path)["frames"] >= 1 and js(browser, "triangles") <= 100_000
+    assert_tags_drawn_where_planned(browser, {"planned": 3})

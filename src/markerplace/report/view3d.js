@@ -373,6 +373,7 @@
     api.setCut = function (z) { setCut(z); draw(); };
     api.reset = function () { reset(); draw(); };
     api.labels = function (on) { layer.style.display = on ? "" : "none"; };
+    api.orbit = function (daz, del) { cam.az += daz; cam.el = Math.max(-1.5, Math.min(1.55, cam.el + del)); draw(); };
     api.camera = function () { return {target: cam.target.slice(), az: cam.az, el: cam.el, dist: cam.dist, cut: cut}; };
     api.focusTag = function (kind, index) {
       var g = tags.filter(function (x) { return x.kind === kind && x.index === index; })[0], n = g.t.normal;

@@ -6,7 +6,7 @@ arrays in a ``<script type="application/json">``, and the viewer) that ``report.
 (:mod:`markerplace.report.check_page`) embed. The page stays one self-contained file that opens
 offline.
 
-**Why a hand-written WebGL viewer** (``view3d.js``, package data, about 300 lines) and not
+**Why a hand-written WebGL viewer** (``view3d.js``, package data, about 400 lines) and not
 three.js from the npm registry: the view needs one coloured mesh, some quads, a polyline, an orbit
 camera and picking, which WebGL 1 does in a few hundred lines; vendoring three.js would add a
 setup step that needs the network (``npm`` on a fresh machine), ~600 kB to every report and a
