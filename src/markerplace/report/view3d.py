@@ -15,16 +15,16 @@ into an off-screen framebuffer and reading the pixel under the pointer.
 
 **What is drawn**, in the scene's internal frame (:mod:`markerplace.scene.worldframe`; the view
 shows no coordinates): the model, decimated to at most ``max_triangles`` triangles with Open3D's
-quadric decimation (:func:`view_mesh`), one colour per vertex (the part's vertex colours, or its
-texture sampled at the vertices when the part is dense as a scan's, or the texture's mean colour
-for the big faces of a procedural scene, times the part's base colour; glass is left out), shaded
-flat by a headlight; each planned tag as a quad in :data:`PLANNED_COLOR` with its number beside
+quadric decimation (:func:`view_mesh`; vertex clustering first for a model of millions of
+faces), one colour per vertex (the part's vertex colours, or its texture sampled at the vertices
+when the part is dense as a scan's, or the texture's mean colour for the big faces of a
+procedural scene, times the part's base colour; glass is left out), shaded flat by a headlight; each planned tag as a quad in :data:`PLANNED_COLOR` with its number beside
 it; after a check, each tag as found as a smaller quad in :data:`FOUND_COLOR` in front; an
 optional camera path as a polyline. Everything above the *cut height* (a slider; by default just
 above the highest tag) is not drawn, so ceilings and roofs do not hide the rooms. Clicking a tag
 selects its card in the page (``id`` given per tag) and scrolls to it.
 
-Size: 100k triangles take about 2 to 4 MB of HTML (positions quantised to 16 bits over the
+Size: 100k triangles take about 1.5 to 4 MB of HTML (positions quantised to 16 bits over the
 bounding box, sub-millimetre on a 20 m building; 8-bit colours; 16- or 32-bit indices).
 """
 
@@ -43,7 +43,7 @@ from markerplace.report.html import esc
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MAX_TRIANGLES", "PLANNED_COLOR", "FOUND_COLOR", "PATH_COLOR", "ViewMesh", "view_mesh", "scene_view_html",
+__all__ = ["MAX_TRIANGLES", "PRE_CLUSTER", "PLANNED_COLOR", "FOUND_COLOR", "PATH_COLOR", "ViewMesh", "view_mesh", "scene_view_html",
            "viewer_script"]
 
 MAX_TRIANGLES = 100_000
@@ -51,6 +51,10 @@ MAX_TRIANGLES = 100_000
 DENSE_PART = 2_000
 """A textured part with at least this many faces (a scan's) is coloured by sampling its texture at
 the vertices; a smaller one (a procedural wall of two triangles) by its texture's mean colour."""
+PRE_CLUSTER = 3
+"""A model of more than this many times ``max_triangles`` faces is first clustered (Open3D vertex
+clustering, a voxel of its mean edge times sqrt(faces / (PRE_CLUSTER max_triangles)): about
+twice the budget) before the quadric decimation, which is slow on millions of faces."""
 PLANNED_COLOR = (232, 89, 12)
 """RGB of a planned tag's quad (orange)."""
 FOUND_COLOR = (28, 126, 214)
@@ -104,7 +108,8 @@ def _part_colors(part) -> np.ndarray:
 
 def view_mesh(scene, max_triangles: int = MAX_TRIANGLES) -> ViewMesh:
     """The scene's opaque parts as one vertex-coloured mesh of at most ``max_triangles`` triangles
-    (Open3D quadric decimation when it has more; vertex colours are carried along)."""
+    (Open3D quadric decimation when it has more, after vertex clustering when it has more than
+    :data:`PRE_CLUSTER` times that; vertex colours are carried along)."""
     parts = [p for p in scene.parts if not p.transparent and len(p.faces)]
     if not parts:
         return ViewMesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32), np.zeros((0, 3), np.uint8), 0)
@@ -118,6 +123,11 @@ def view_mesh(scene, max_triangles: int = MAX_TRIANGLES) -> ViewMesh:
 
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(verts), o3d.utility.Vector3iVector(faces))
         mesh.vertex_colors = o3d.utility.Vector3dVector(colors / 255.0)
+        if source > PRE_CLUSTER * max_triangles:  # a dense scan: vertex clustering first (13x faster on 1.1 M faces)
+            sample = faces[:: max(1, source // 20_000)]
+            edge = float(np.linalg.norm(verts[sample[:, 0]] - verts[sample[:, 1]], axis=1).mean())
+            voxel = edge * np.sqrt(source / (PRE_CLUSTER * max_triangles))
+            mesh = mesh.simplify_vertex_clustering(voxel, o3d.geometry.SimplificationContraction.Average)
         mesh = mesh.simplify_quadric_decimation(target_number_of_triangles=int(max_triangles))
         mesh.remove_unreferenced_vertices()
         verts, faces = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
