@@ -62,3 +62,13 @@ def tiny_frames(tmp_path_factory):
     from helpers.frames import write_tiny_frames
 
     return write_tiny_frames(tmp_path_factory.mktemp("frames") / "tiny")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A headless chromium WebDriver (:mod:`helpers.browser`), one per module."""
+    from helpers.browser import start_browser
+
+    driver = start_browser()
+    yield driver
+    driver.quit()

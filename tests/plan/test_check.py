@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from helpers import negative_zeros
+from helpers.browser import check_page, click_tag, view_call
 from markerplace.cli.main import main
 
 @pytest.fixture(scope="module")
@@ -117,6 +118,28 @@ def test_shifted_missing_swapped_and_extra_tags(plan, tmp_path, capsys):
     assert len((out / "check.csv").read_text().strip().splitlines()) == 1 + 5
     layout = json.loads((out / "tagmaps" / "wpilib_field_layout.json").read_text())
     assert sorted(t["ID"] for t in layout["tags"]) == sorted([a["tag_id"], c["tag_id"], d["tag_id"], 50])
+
+
+def test_check_html_shows_the_installed_tags_in_3d(plan, browser, tmp_path, capsys):
+    """check.html (report/check_page.py): the cards, and the planned and installed tags in 3D."""
+    a, b = markers_of(plan)[:2]
+    T = np.array(a["world_from_marker"])
+    installed = [{"tag_id": a["tag_id"], "position": (T[:3, 3] + 0.3 * T[:3, 0]).tolist(), "normal": a["normal"]},
+                 {"tag_id": b["tag_id"], "size": b["size"], "world_from_marker": b["world_from_marker"]}]
+    (tmp_path / "hung.json").write_text(json.dumps(installed))
+    out = tmp_path / "check"
+    assert main(["check", str(plan), "--installed", str(tmp_path / "hung.json"), "--out", str(out), "--quiet"]) == 0
+    assert "check.html" in capsys.readouterr().out
+    page = check_page(browser, out / "check.html")
+    assert page["images"] == ["check_map.png"]
+    assert "#1: planned id" in page["text"] and page["text"].count("status missing") == 2
+    assert view_call(browser, "mp-view3d-check", "error") is None
+    tags = view_call(browser, "mp-view3d-check", "projectedTags()")
+    assert [(t["kind"], t["label"], t["card"]) for t in tags] == [
+        *(("planned", str(i), f"tag{i}") for i in (1, 2, 3, 4)),  # #3 and #4 missing
+        ("found", f"id {a['tag_id']}", "tag1"), ("found", f"id {b['tag_id']}", "tag2")]
+    view_call(browser, "mp-view3d-check", "focusTag('found', 0)")  # the shifted tag selects the card of its spot
+    assert click_tag(browser, "mp-view3d-check", "found", 0) == ["tag1"]
 
 
 def test_directions_in_the_installers_terms():

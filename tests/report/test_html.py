@@ -1,18 +1,17 @@
-"""report.html of `plan` and `evaluate`, loaded in a real headless browser (Debian's chromium
-driven by selenium through /usr/bin/chromedriver: `make setup` installs both), and the caption
+"""report.html of `plan` and `evaluate`, loaded in a real headless browser (:mod:`helpers.browser`;
+the `browser` fixture is in tests/conftest.py), and the caption
 maths (facing, wall, height above the local floor, distance along the wall to the nearest corner
 or door edge) on hand-built rooms."""
 
 from __future__ import annotations
 
-import io
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from helpers import FAST_2_YAWS as FAST
+from helpers.browser import check_page, click_tag, view_call
 from markerplace.cli.main import main
 from markerplace.report.captions import describe_tag, facing_label, wall_side
 from markerplace.testbed.reporting.page import gallery_selection
@@ -20,8 +19,6 @@ from markerplace.report.html import markdown_to_html
 from markerplace.report.installer import standing_distance
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene
-
-CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 
 
 # ---------------------------------------------------------------- hand-built rooms
@@ -146,45 +143,6 @@ def test_markdown_tables_become_html_tables():
 # ---------------------------------------------------------------- the pages in a browser
 
 @pytest.fixture(scope="module")
-def browser():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    for path in (CHROMIUM, CHROMEDRIVER):
-        assert Path(path).is_file(), f"{path} missing: run `make setup` (installs chromium and chromium-driver)"
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,1600",
-                "--allow-file-access-from-files"):
-        opts.add_argument(arg)
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
-    yield driver
-    driver.quit()
-
-
-def check_page(driver, path: Path) -> dict:
-    """Load ``path`` from disk; assert no SEVERE console entry, no broken image, a screenshot
-    that is not blank, and nothing fetched from elsewhere. Returns facts about the page."""
-    from PIL import Image
-
-    text = path.read_text()
-    assert not re.search(r"""(src|href)\s*=\s*["'](?!data:|#)""", text), "a resource outside the file"
-    driver.get(path.resolve().as_uri())
-    images = driver.execute_script(
-        "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth, i.src.slice(0, 11)])")
-    severe = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-    assert not severe, severe
-    assert images, "no images"
-    broken = [alt for alt, complete, width, _ in images if not complete or width <= 0]
-    assert not broken, f"broken images: {broken}"
-    assert all(src.startswith("data:image") for *_, src in images)
-    shot = np.asarray(Image.open(io.BytesIO(driver.get_screenshot_as_png())).convert("L"), float)
-    assert shot.std() > 10.0, f"blank screenshot (std {shot.std():.1f})"
-    return {"images": [alt for alt, *_ in images], "text": driver.find_element("tag name", "body").text}
-
-
-@pytest.fixture(scope="module")
 def tiny_plan(run_plan):
     return run_plan(2, options=FAST, folder="plan_report")
 
@@ -200,6 +158,22 @@ def test_plan_report_in_browser(tiny_plan, browser):
     assert re.search(r"\d\.\d\d m from the (corner|door edge|end of the wall) on the (left|right)", page["text"])
     assert "+x = east, +y = north" in page["text"]
     assert page["text"].count("On the wall (model part tiny/wall/") == 2  # what each tag is on
+
+
+def test_plan_report_3d_view_opens_a_card(tiny_plan, browser):
+    """The report's 3D view draws the plan's tags, numbered by placement order; a click on a tag
+    (the camera turned to it) selects and scrolls to its card."""
+    browser.get((tiny_plan / "report.html").resolve().as_uri())
+    view = "mp-view3d"
+    assert view_call(browser, view, "error") is None and view_call(browser, view, "frames") >= 1
+    tags = view_call(browser, view, "projectedTags()")
+    assert [(t["label"], t["card"]) for t in tags] == [("1", "tag1"), ("2", "tag2")]
+    for i in range(2):
+        view_call(browser, view, f"focusTag('planned', {i})")
+        assert click_tag(browser, view, "planned", i) == [f"tag{i + 1}"]
+        top, height = browser.execute_script(f"return [document.getElementById('tag{i + 1}').getBoundingClientRect()"
+                                             ".top, window.innerHeight]")
+        assert -2 <= top < height - 100  # scrolled to it
 
 
 def test_reject_buttons_download_a_file_that_plan_exclude_accepts(tiny_plan, browser, tmp_path, capsys):

@@ -1,7 +1,8 @@
 """``markerplace check PLAN_DIR --installed installed.json``: the tags as a person measured them
 on the walls, compared with the plan (:mod:`markerplace.plan.check`), and what it found written
 (:mod:`markerplace.report.check_report`). The plan folder's cached stages are reused
-(:func:`markerplace.pipelines.plan.prepare`)."""
+(:func:`markerplace.pipelines.plan.prepare`); ``check.html`` shows it in 3D
+(:mod:`markerplace.report.check_page`)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from markerplace.markers import check_markers_on_walls, load_markers
 from markerplace.pipelines.plan import prepare
 from markerplace.plan import check
 from markerplace.plan.folder import read_plan_folder
+from markerplace.report.check_page import write_check_page
 from markerplace.report.check_report import write_check_outputs
 from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
@@ -26,7 +28,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["load_installed", "run_check", "CHECK_OUTPUTS"]
 
-CHECK_OUTPUTS = ("check.json", "check.csv", "check_map.png", *tag_map_patterns())
+CHECK_OUTPUTS = ("check.json", "check.csv", "check_map.png", "check.html", *tag_map_patterns())
 """What ``check`` writes into its ``--out`` folder (see :data:`markerplace.pipelines.plan.PLAN_OUTPUTS`)."""
 
 
@@ -82,4 +84,5 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     result = check.compare(data, planned, cands, installed, covs,
                            radius=check.MATCH_RADIUS_M if radius is None else radius)
     text = write_check_outputs(out, result, offset, folder, installed_user)
+    write_check_page(out, scene, result, planned, installed)
     return out, text

@@ -14,6 +14,8 @@ metres, the file's coordinates):
   installed tags numbered by their spot's placement order as on ``placement.png`` (an extra tag
   by ``+`` and its id), the planned spots as ticks and each missing tag as a magenta cross with
   its number, one panel per storey;
+* ``check.html``: the same in one page with a 3D view of the planned and installed tags
+  (:mod:`markerplace.report.check_page`, written by the pipeline after these);
 * ``tagmaps/``: the known-tag maps of the tags as installed (what the robot should load;
   :mod:`markerplace.report.tagmaps`).
 """
@@ -140,5 +142,5 @@ def _text(out: Path, summary: dict, rows: list, worst: list) -> str:
                   "nats)" for w in worst]
     else:
         lines.append("no camera location lost anything")
-    lines.append(f"wrote {out}/check.json, check.csv, check_map.png, tagmaps/ (the tags as installed)")
+    lines.append(f"wrote {out}/check.json, check.csv, check_map.png, check.html, tagmaps/ (the tags as installed)")
     return "\n".join(lines)

@@ -1,8 +1,9 @@
 """Self-contained HTML pages: images embedded as data URIs, CSS inline, no network.
 
 A page opens from disk in any browser, can be mailed as one file, and shows the same offline.
-The only script is the plan report's review buttons (:mod:`markerplace.report.review`: inline,
-no library; it builds its download as a ``data:`` URL).
+The scripts are inline and use no library: the plan report's review buttons
+(:mod:`markerplace.report.review`; it builds its download as a ``data:`` URL) and the 3D view
+(:mod:`markerplace.report.view3d`: WebGL, its data embedded as base64).
 Helpers here build the pieces (escaped text, tables, figures, markdown tables from
 ``tables.md``) and :func:`write_page` writes the document atomically.
 """
@@ -44,6 +45,15 @@ figure { margin: 0.5em 0; } figcaption { font-size: 0.85em; color: #555; }
 button.mp-reject { font: inherit; padding: 0.25em 0.8em; border: 1px solid #a00; color: #a00; background: #fff;
                    border-radius: 4px; cursor: pointer; } button.mp-reject.on { background: #a00; color: #fff; }
 a.mp-download[aria-disabled="true"] { color: #888; pointer-events: none; }
+.mp-view3d-stage { position: relative; border: 1px solid #ccc; background: #eef1f5; }
+.mp-view3d-stage canvas { display: block; width: 100%; height: 100%; cursor: grab; }
+.mp-view3d-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
+.mp-label { position: absolute; transform: translate(-50%, -100%); color: #fff; font: bold 12px sans-serif;
+            padding: 0 4px; border-radius: 3px; white-space: nowrap; }
+.mp-label.mp-found { transform: translate(-50%, 0); } .mp-label.mp-hidden { opacity: 0.35; }
+.mp-view3d-bar { margin: 0.4em 0; font-size: 0.9em; } .mp-view3d-bar input { vertical-align: middle; }
+.mp-swatch { display: inline-block; width: 0.9em; height: 0.9em; margin-left: 1em; vertical-align: middle; }
+.mp-selected { outline: 3px solid #f5c518; outline-offset: 2px; }
 """
 
 
