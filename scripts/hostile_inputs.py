@@ -781,7 +781,7 @@ def probe_cases(w: Path, f: dict) -> list[Case]:
     small_eval = ["--k", "2", "--tests", "10", *FAST]
     c: list[Case] = []
     # foreign files and folders named like an output, in an adopted folder: refused before any work
-    adopted = {"plan": (plan, PLAN_FILES), "check": (check, ("check.json", "check.csv", "check_map.png")),
+    adopted = {"plan": (plan, PLAN_FILES), "check": (check, ("check.json", "check.csv", "check_map.png", "check.html")),
                "evaluate": (lambda name: ["evaluate", "tiny", "--out", o(name), *small_eval],
                             ("recall.csv", "tables.md", "timings.json", "test_poses_weighted.npz", "report.html",
                              "plan/similarity.npz")),
