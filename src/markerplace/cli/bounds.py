@@ -25,7 +25,7 @@ __all__ = ["BOUNDS", "check_args", "command_name", "field_bound"]
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
 
 _FIELD_BOUNDS = {
-    "K": ("plan", "placement.k"), "V": ("plan", "placement.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
+    "K": ("plan", "placement.k"), "V": ("plan", "placement.methods.omp.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
     "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
     "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
     "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
