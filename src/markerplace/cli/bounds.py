@@ -12,11 +12,12 @@ from __future__ import annotations
 
 from markerplace.errors import UserError
 from markerplace.pipelines.study import StudyPlan
-from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
+from markerplace.validation import (COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
                                     IMAGE_WIDTH, MATCH_RADIUS, MAX_DT, SEED, SPLIT_BLOCK, SPLIT_GAP, SPLIT_MAP_STEP,
                                     SPLIT_QUERY_STEP, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats, parse_int_list)
 from markerplace.plan.config import PlanConfig
 from markerplace.runtime.cluster import parse_cluster
+from markerplace.runtime.executor import RuntimeConfig
 from markerplace.settings import bounds_by_dest, walk
 from markerplace.testbed.config import EvaluateConfig
 
@@ -70,7 +71,7 @@ def _bounds() -> dict[str, dict[str, Bound]]:
             "evaluate": {**plan, **evaluate, "block": SPLIT_BLOCK, "gap_frames": SPLIT_GAP, "map_step": SPLIT_MAP_STEP,
                          "query_step": SPLIT_QUERY_STEP},
             "study": {**plan, **bounds_by_dest(configs["evaluate"], "study"), **bounds_by_dest(StudyPlan(), "study")},
-            "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
+            "check": {"match_radius": MATCH_RADIUS, **bounds_by_dest(RuntimeConfig(), "check")},
         })
     return _BOUNDS
 

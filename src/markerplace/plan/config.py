@@ -88,6 +88,9 @@ def warn_unused_settings(config: PlanConfig) -> None:
         conf = method_conf(name, p)
         if name in used or conf == cls.default_conf:
             continue
-        changed = [f.name for f in fields(conf) if getattr(conf, f.name) != getattr(cls.default_conf, f.name)]
-        log.warning("%s of %s (placement.methods.%s) has no effect with --method %s: the plan does not use %s",
-                    ", ".join(changed), name, settings_name(name), p.method, name)
+        flags = {leaf.path: leaf.setting.flag for leaf in walk(conf)}
+        changed = [f"{flags.get(f.name) or f'placement.methods.{settings_name(name)}.{f.name} ='} "
+                   f"{getattr(conf, f.name)}" for f in fields(conf)
+                   if getattr(conf, f.name) != getattr(cls.default_conf, f.name)]
+        log.warning("%s has no effect with --method %s (a setting of %s, which this plan neither places nor "
+                    "calibrates)", ", ".join(changed), p.method, name)
