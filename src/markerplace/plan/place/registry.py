@@ -41,7 +41,7 @@ def method_settings():
     Raises:
         ValueError: a method name that makes no Python identifier (a programming error).
     """
-    key = tuple(PLACEMENT_METHODS.items())
+    key = tuple((name, cls, cls.default_conf) for name, cls in PLACEMENT_METHODS.items())
     cls = _CLASSES.get(key)
     if cls is None:
         specs = []
