@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import argparse
 import logging
-from typing import Sequence
-
 import tomllib
 from dataclasses import fields, replace
+from typing import Sequence
 
 from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
 from markerplace.config_file import checked_value, read_config_file
