@@ -59,7 +59,7 @@ def sequence_objective(run_dir: Path, plan_scene: list[str], order: list[int]) -
     data = prepare(SceneSpec(plan_scene[0], up), config, run_dir, progress=False)
     cov = data.coverages[:data.num_candidates]
     N = data.base_info.shape[0]
-    q, _ = weighted_q_from_v(coverage_percentages(cov, N, None), config.placement.v, False)
+    q, _ = weighted_q_from_v(coverage_percentages(cov, N, None), config.placement.methods.omp.v, False)
     prob = GreedyProblem(data.base_info.copy(), cov, q)
     total = 0.0
     for m in order:

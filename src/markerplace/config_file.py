@@ -41,7 +41,7 @@ from markerplace.runtime.run_lock import odd_entry
 
 log = logging.getLogger(__name__)
 
-__all__ = ["read_config_file", "RUN_RECORD_KEYS"]
+__all__ = ["read_config_file", "checked_value", "RUN_RECORD_KEYS"]
 
 RUN_RECORD_KEYS = ("scene", "scene_options", "existing_markers", "exclude", "where")
 """Top-level keys of a plan's ``config.json`` that record the run's inputs, not settings."""
@@ -52,9 +52,25 @@ LEGACY_DISCRETIZE_KEYS = ("marker_spacing", "normal_diff_deg", "tag_border", "fl
 ``discretize.candidates`` (read there); its ``discretize.tag_size`` was ``placement.tag_size``."""
 
 
+LEGACY_PLACEMENT_KEYS = {"v": "omp", "lazy": "omp", "calibration_poses": "expected_recall"}
+"""``placement`` keys of a config from before each method's settings moved to
+``placement.methods.<method>`` (read there): key -> method (``-`` as ``_``)."""
+
+
 def upgrade_legacy(data: dict) -> dict:
-    """A config dict with the flat ``discretize`` layout of older plan folders moved to the
-    nested one (a dict already nested is returned unchanged)."""
+    """A config dict with the layouts of older plan folders moved to today's: the flat
+    ``discretize`` to the nested one, and the method settings of ``placement``
+    (:data:`LEGACY_PLACEMENT_KEYS`) to ``placement.methods`` (a dict of today's layout is
+    returned unchanged)."""
+    placement = data.get("placement")
+    if isinstance(placement, dict) and any(k in placement for k in LEGACY_PLACEMENT_KEYS):
+        placement = dict(placement)
+        methods = {m: dict(v) for m, v in placement.get("methods", {}).items()} \
+            if isinstance(placement.get("methods"), dict) else {}
+        for key, method in LEGACY_PLACEMENT_KEYS.items():
+            if key in placement:
+                methods.setdefault(method, {})[key] = placement.pop(key)
+        data = {**data, "placement": {**placement, "methods": methods}}
     disc = data.get("discretize")
     if not isinstance(disc, dict) or "candidates" in disc or not any(k in disc for k in LEGACY_DISCRETIZE_KEYS):
         return data
@@ -90,6 +106,7 @@ def read_config_file(path: str | Path, base: Any) -> Any:
                             "fix it") from None
         if _depth(data) > MAX_JSON_DEPTH:
             raise UserError(f"{what} nests arrays/tables more than {MAX_JSON_DEPTH} deep: not a settings file; fix it")
+        data = upgrade_legacy(data)  # [placement] v = 80 as before methods had their own tables
     elif path.suffix.lower() == ".json":
         data = read_json(path, what)
         if not isinstance(data, dict):
@@ -134,11 +151,16 @@ def _collect(data: dict, config: Any, prefix: str, updates: dict, what: str) -> 
                 raise UserError(f"{what}: {path} is a table of settings ([{path}]), not a value")
             _collect(value, current, path + ".", updates, what)
             continue
-        updates[path] = _value(leaves[path], value, what)
+        updates[path] = checked_value(leaves[path], value, what)
 
 
-def _value(leaf: Leaf, value: Any, what: str) -> Any:
-    """The field value of ``value`` read from a file for ``leaf``, checked."""
+def checked_value(leaf: Leaf, value: Any, what: str) -> Any:
+    """The field value of ``value`` (as a TOML or JSON file holds it) for ``leaf``, checked:
+    its type, choices and bounds, else one line starting with ``what``.
+
+    Raises:
+        UserError: a value of the wrong type, not one of the choices or out of its bounds.
+    """
     s, key, ann = leaf.setting, leaf.path, leaf.annotation
 
     def bad(expected: str) -> UserError:

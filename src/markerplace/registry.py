@@ -30,12 +30,16 @@ class Registry(dict):
     Attributes:
         kind: what the parts are, for messages (``"placement method"``).
         option: the command-line option that chooses one (``"--method"``), for messages.
+        base: the base class every part subclasses (its contract), or None; with a base, a
+            part's ``default_conf`` must also be an instance of the base's ``default_conf``'s
+            class (the settings the base promises).
     """
 
-    def __init__(self, kind: str, option: str):
+    def __init__(self, kind: str, option: str, base: type | None = None):
         super().__init__()
         self.kind = kind
         self.option = option
+        self.base = base
 
     def register(self, cls: type) -> type:
         """Class decorator: add ``cls`` under ``cls.name``.
@@ -55,6 +59,10 @@ class Registry(dict):
         if not (dataclasses.is_dataclass(conf) and not isinstance(conf, type)
                 and type(conf).__dataclass_params__.frozen):
             raise ValueError(f"{cls.__name__}: default_conf must be a frozen dataclass instance")
+        if self.base is not None and not (isinstance(cls, type) and issubclass(cls, self.base)
+                                          and isinstance(conf, type(self.base.default_conf))):
+            raise ValueError(f"{cls.__name__}: a registered {self.kind} subclasses {self.base.__name__} and its "
+                             f"Config subclasses {type(self.base.default_conf).__name__}")
         self[name] = cls
         return cls
 

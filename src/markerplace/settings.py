@@ -313,7 +313,7 @@ def check_bounds(config: Any, prefix: str = "") -> None:
 
 
 NO_FLAG: dict[str, str] = {
-    "placement.lazy": "an implementation switch (the same picks either way); set it in a --config file",
+    "placement.recall_model": "the calibrated method whose success model predicts recall; set it in a --config file",
     "placement.first_tag_id": "the tag ids of a plan start at 0; set it in a --config file",
     "placement.k@evaluate": "evaluate places max(--k) markers (its --k is the study's list of budgets)",
     "placement.method@evaluate": "evaluate runs every method of --methods",
@@ -344,5 +344,7 @@ NO_FLAG_SECTIONS: dict[str, str] = {
     "similarity.": "the look-alike search's internals: set them in a --config file",
     "noise.": "the scoring's noise model, as published: set it in a --config file",
     "runtime.batch": "a throughput knob of the executor (results do not depend on it)",
+    "placement.methods.": "a placement method's own settings: --method-conf KEY=VALUE, or the table "
+                          "[placement.methods.NAME] of a --config file",
 }
 """Config sections (path prefixes) whose fields have no flag unless a field says otherwise."""

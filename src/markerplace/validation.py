@@ -49,7 +49,6 @@ SPLIT_GAP = Bound("--gap-frames", 1, 1_000_000, "", "frames left out at each end
                   integer=True)
 SPLIT_MAP_STEP = Bound("--map-step", 1, 1_000_000, "", "a frame step of the map blocks, e.g. 2", integer=True)
 SPLIT_QUERY_STEP = Bound("--query-step", 1, 1_000_000, "", "a frame step of the query blocks, e.g. 2", integer=True)
-CHECK_WORKERS = Bound("--workers", 1, 256, "", "a number of processes, e.g. 1", integer=True)
 MATCH_RADIUS = Bound("--match-radius", 0.05, 20.0, "m", "a distance in metres, e.g. 1.5")
 
 def parse_level(text: str):

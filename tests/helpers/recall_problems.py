@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from markerplace.geometry import world_from_marker_pose
-from markerplace.plan.place.predicted import RECALL_MODEL
+from markerplace.plan.place.config import PlacementConfig
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.success_model import SuccessModel
 from markerplace.plan.types import MarkerCoverage, PlanData
@@ -41,5 +41,5 @@ def plan_data(seed: int = 0, N: int = 40, C: int = 10, E: int = 0, above: float 
     disc = SimpleNamespace(candidate_world_from_marker=np.stack(
         [world_from_marker_pose(np.array([i, 0.0, 1.5]), np.array([0.0, 1.0, 0.0])) for i in range(C)]))
     data = PlanData(disc, base, -entropy(base), covs, C, {})
-    data.calibration[RECALL_MODEL] = {"model": success_model(base, above=above), "coverages": covs}
+    data.calibration[PlacementConfig().recall_model] = {"model": success_model(base, above=above), "coverages": covs}
     return data

@@ -15,7 +15,7 @@ from skimage import data
 from markerplace.geometry import Intrinsics, invert, so3_exp, world_from_cam_pose, world_from_marker_pose
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
 from markerplace.localization.features import SIFT_DEFAULT
-from markerplace.localization.localizer import Localizer, LocalizerConfig
+from markerplace.localization.localizer import LocalizerConfig, SiftPnP
 from markerplace.localization.pnp import pose_errors
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
@@ -140,7 +140,7 @@ QUERIES = [
 ], ids=["tags", "no-tags", "tag-corners"])
 def test_localizer_recovers_query_pose(world, config):
     walls, _, db = world
-    loc = Localizer(db, K, config)
+    loc = SiftPnP(db, K, config)
     for pos, yaw, tilt in QUERIES:
         T = _tilted(pos, yaw, tilt)
         rgb, _ = _render(walls, T)
@@ -157,18 +157,18 @@ def test_tag_retrieval_puts_tag_observers_first(world):
     walls, _, db = world
     T = _tilted([0.2, 0.6, 1.45], 95.0, (2.0, -1.0, 3.0))
     rgb, _ = _render(walls, T)
-    loc = Localizer(db, K, LocalizerConfig())
+    loc = SiftPnP(db, K, LocalizerConfig())
     res = loc.localize(rgb)
     assert res.detected_tag_ids == [TAG_ID]
     first = res.candidates[0]
     assert first in db.tag_index[TAG_ID]
     assert np.linalg.norm(db.poses[first][:3, 3] - T[:3, 3]) <= 2.0
-    assert Localizer(db, K, LocalizerConfig(use_tags=False)).localize(rgb).detected_tag_ids == []
+    assert SiftPnP(db, K, LocalizerConfig(use_tags=False)).localize(rgb).detected_tag_ids == []
 
 
 def test_localizer_fails_on_featureless_query(world):
     _, _, db = world
-    res = Localizer(db, K).localize(np.full((INTR.height, INTR.width, 3), 127, np.uint8))
+    res = SiftPnP(db, K).localize(np.full((INTR.height, INTR.width, 3), 127, np.uint8))
     assert res.world_from_cam is None and not res.success
     assert res.num_matches == 0 and res.detected_tag_ids == []
 
@@ -188,27 +188,40 @@ def test_localizer_registry(world):
     from dataclasses import dataclass
 
     from markerplace.errors import UserError
-    from markerplace.localization.localizer import LOCALIZERS, get_localizer
+    from markerplace.localization.localizer import LOCALIZERS, Localizer, LocalizerSettings, get_localizer
 
     walls, _, db = world
-    assert LOCALIZERS.names() == ("sift_pnp",) and LOCALIZERS["sift_pnp"] is Localizer
+    assert LOCALIZERS.names() == ("sift_pnp",) and LOCALIZERS["sift_pnp"] is SiftPnP
     with pytest.raises(UserError, match="--localizer 'hloc' is not known: use one of sift_pnp"):
         get_localizer("hloc", db, K)
     loc = get_localizer("sift_pnp", db, K, use_tags=False, num_candidates=4)
     assert loc.config == LocalizerConfig(use_tags=False, num_candidates=4)
-    assert Localizer(db, K).config == Localizer.default_conf == LocalizerConfig()
+    assert SiftPnP(db, K).config == SiftPnP.default_conf == LocalizerConfig()
     pos, yaw, tilt = QUERIES[0]
     rgb, _ = _render(walls, _tilted(pos, yaw, tilt))
-    a, b = loc.localize(rgb), Localizer(db, K, LocalizerConfig(use_tags=False, num_candidates=4)).localize(rgb)
+    a, b = loc.localize(rgb), SiftPnP(db, K, LocalizerConfig(use_tags=False, num_candidates=4)).localize(rgb)
     assert a.candidates == b.candidates and np.array_equal(a.world_from_cam, b.world_from_cam)
 
     @dataclass(frozen=True)
-    class Conf:
+    class Conf(LocalizerSettings):
         pass
+
+    @dataclass(frozen=True)
+    class Bare:
+        use_tags: bool = True
 
     class Second(Localizer):
         name, summary, Config, default_conf = "second", "a second one", Conf, Conf()
 
+    class Unsettled(Localizer):  # a Config without the settings the testbed sets
+        name, summary, Config, default_conf = "unsettled", "no LocalizerSettings", Bare, Bare()
+
+    class Stranger:  # not a Localizer
+        name, summary, Config, default_conf = "stranger", "no base class", Conf, Conf()
+
+    for cls in (Unsettled, Stranger):
+        with pytest.raises(ValueError, match="subclasses Localizer and its Config subclasses LocalizerSettings"):
+            LOCALIZERS.register(cls)
     try:
         LOCALIZERS.register(Second)
         assert LOCALIZERS.names() == ("sift_pnp", "second")

@@ -6,7 +6,7 @@ import pytest
 from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.geometry import Intrinsics, rotation_angle_deg
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
-from markerplace.localization.localizer import Localizer, LocalizerConfig
+from markerplace.localization.localizer import LocalizerConfig, SiftPnP
 from markerplace.localization.pnp import pose_errors
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
@@ -30,7 +30,7 @@ def tiny_world():
 
 
 def test_query_rendered_at_a_map_pose_localizes_within_1cm_1deg(tiny_world):
-    loc = Localizer(tiny_world["db"], tiny_world["intr"].K, LocalizerConfig(use_tags=False))
+    loc = SiftPnP(tiny_world["db"], tiny_world["intr"].K, LocalizerConfig(use_tags=False))
     db = tiny_world["db"]
     richest = np.argsort([-len(db.features(i)[0]) for i in range(len(tiny_world["poses"]))])[:3]
     for i in richest:  # textured views: exact
@@ -57,7 +57,7 @@ def test_query_that_sees_the_tag_detects_it_and_localizes(tiny_world):
 
     truth = world_from_cam_pose(pos, yaw)
     rgb = tiny_world["renderer"].render(truth, depth=False, normal=False).rgb
-    loc = Localizer(tiny_world["db"], tiny_world["intr"].K, LocalizerConfig(use_tags=True))
+    loc = SiftPnP(tiny_world["db"], tiny_world["intr"].K, LocalizerConfig(use_tags=True))
     res = loc.localize(rgb)
     assert marker.tag_id in res.detected_tag_ids
     assert res.world_from_cam is not None

@@ -11,7 +11,7 @@ import pytest
 from helpers import REPO
 from markerplace.cli.main import main
 from markerplace.localization.database import MapDatabase
-from markerplace.localization.localizer import Localizer
+from markerplace.localization.localizer import SiftPnP
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
 from markerplace.testbed.ceiling import oracle_order
@@ -36,7 +36,7 @@ def test_retrieval_leaves_out_excluded_images_and_keeps_the_order_of_the_rest():
     from markerplace.testbed.predict import Retrieval
 
     db = _db()
-    loc = Localizer(db, np.eye(3), num_candidates=5)
+    loc = SiftPnP(db, np.eye(3), num_candidates=5)
     q = db.vlad[3] + 0.1 * db.vlad[7]
     q /= np.linalg.norm(q)
     full = loc.retrieve(q, [])

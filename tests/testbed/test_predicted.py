@@ -20,6 +20,8 @@ from markerplace.testbed.marker_sets import PlacementRun
 from markerplace.testbed.poses import sampling_probabilities
 from markerplace.testbed.predicted import drawn_weights, predict_recalls, test_set_weights
 
+RECALL = PlacementConfig().recall_model  # the calibrated method whose model predicts recall
+
 SIZE = 0.4
 
 
@@ -42,7 +44,7 @@ def test_a_placements_prediction_is_the_plans_curve_at_its_k():
     runs = [PlacementRun("none", 0, 0, ()), _run(data, "omp", 0, order[:2]), _run(data, "omp", 0, order),
             _run(data, "random", 1, [0, 5]), _run(data, "shifted", 0, order[:2], shift=0.3),
             _run(data, "ceiling", 0, order[:2]), _run(data, "single", 3, [3])]
-    got = predict_recalls(data, runs, poses, SIZE)
+    got = predict_recalls(data, runs, poses, SIZE, RECALL)
     # none, omp k=2, omp k=4 and random, on both sets; off-candidate and ceiling runs left out
     assert {k[1:] for k in got} == {("none", 0, 0), ("omp", 0, 2), ("omp", 0, 4), ("random", 1, 2)}
     for k in (0, 2, 4):  # uniform: the plan's own curve (no --where) at the same k
@@ -50,10 +52,10 @@ def test_a_placements_prediction_is_the_plans_curve_at_its_k():
         assert got[key][0] == pytest.approx(curve[k], abs=1e-6)
     w = 40 * sampling_probabilities(data.base_score, "weighted")
     assert np.allclose(test_set_weights(data.base_score, "weighted"), w)
-    assert got[("weighted", "omp", 0, 2)][0] == pytest.approx(marker_set_curve(data, order[:2], w)[-1], abs=1e-12)
+    assert got[("weighted", "omp", 0, 2)][0] == pytest.approx(marker_set_curve(data, order[:2], w, RECALL)[-1], abs=1e-12)
     drawn = drawn_weights(40, poses["weighted"].source_index)
     assert drawn.sum() == pytest.approx(40) and np.count_nonzero(drawn) == len(np.unique(poses["weighted"].source_index))
-    assert got[("weighted", "random", 1, 2)][1] == pytest.approx(marker_set_curve(data, [0, 5], drawn)[-1], abs=1e-12)
+    assert got[("weighted", "random", 1, 2)][1] == pytest.approx(marker_set_curve(data, [0, 5], drawn, RECALL)[-1], abs=1e-12)
 
 
 def test_the_where_test_set_uses_the_plans_pose_weights():
@@ -65,7 +67,7 @@ def test_the_where_test_set_uses_the_plans_pose_weights():
     placement = place(data, conf, progress=False)
     curve = predicted_recall(data, placement, conf)["recall"]  # a plan made with --where
     poses = {"where": SimpleNamespace(source_index=np.arange(10))}
-    got = predict_recalls(data, [_run(data, "omp", 0, [int(c) for c in placement.candidates])], poses, SIZE)
+    got = predict_recalls(data, [_run(data, "omp", 0, [int(c) for c in placement.candidates])], poses, SIZE, RECALL)
     assert got[("where", "omp", 0, 2)][0] == pytest.approx(curve[2], abs=1e-6)
     assert np.allclose(test_set_weights(data.base_score, "where", w), w)
 

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 from markerplace.errors import UserError
 from markerplace.pipelines.study import StudyPlan
-from markerplace.validation import (CHECK_WORKERS, COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
+from markerplace.validation import (COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
                                     IMAGE_WIDTH, MATCH_RADIUS, MAX_DT, SEED, SPLIT_BLOCK, SPLIT_GAP, SPLIT_MAP_STEP,
                                     SPLIT_QUERY_STEP, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats, parse_int_list)
 from markerplace.plan.config import PlanConfig
 from markerplace.runtime.cluster import parse_cluster
+from markerplace.runtime.executor import RuntimeConfig
 from markerplace.settings import bounds_by_dest, walk
 from markerplace.testbed.config import EvaluateConfig
 
@@ -25,7 +26,7 @@ __all__ = ["BOUNDS", "check_args", "command_name", "field_bound"]
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
 
 _FIELD_BOUNDS = {
-    "K": ("plan", "placement.k"), "V": ("plan", "placement.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
+    "K": ("plan", "placement.k"), "V": ("plan", "placement.methods.omp.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
     "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
     "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
     "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
@@ -70,7 +71,7 @@ def _bounds() -> dict[str, dict[str, Bound]]:
             "evaluate": {**plan, **evaluate, "block": SPLIT_BLOCK, "gap_frames": SPLIT_GAP, "map_step": SPLIT_MAP_STEP,
                          "query_step": SPLIT_QUERY_STEP},
             "study": {**plan, **bounds_by_dest(configs["evaluate"], "study"), **bounds_by_dest(StudyPlan(), "study")},
-            "check": {"match_radius": MATCH_RADIUS, "workers": CHECK_WORKERS},
+            "check": {"match_radius": MATCH_RADIUS, **bounds_by_dest(RuntimeConfig(), "check")},
         })
     return _BOUNDS
 

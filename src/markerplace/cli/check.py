@@ -8,10 +8,13 @@ import argparse
 from markerplace.pipelines.check import run_check
 from markerplace.cli.options import add_adopt_arg, add_force_arg
 from markerplace.plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
+from markerplace.runtime.executor import RuntimeConfig
+from markerplace.settings import add_setting_args, apply, values_from_args
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, workers=args.workers,
+    runtime = apply(RuntimeConfig(), values_from_args(args, RuntimeConfig(), "check"))
+    _, text = run_check(args.plan_dir, args.installed, args.out, radius=args.match_radius, runtime=runtime,
                         progress=not args.quiet, adopt=args.adopt)
     print(text)
     return 0
@@ -34,7 +37,7 @@ def add_check_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--match-radius", type=float, default=MATCH_RADIUS_M,
                    help=f"an installed tag farther than this from a planned spot is not that spot's tag, metres "
                         f"(default {MATCH_RADIUS_M:g})")
-    p.add_argument("--workers", type=int, default=1, help="processes for the depth renders (default 1: this process)")
+    add_setting_args(p, RuntimeConfig(), "check")  # --workers, as plan's
 
     add_force_arg(p)
     add_adopt_arg(p)  # PLAN_DIR from an older markerplace, or an --out folder it did not make

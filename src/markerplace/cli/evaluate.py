@@ -9,7 +9,7 @@ import argparse
 import logging
 
 from markerplace.cli.frames_eval import add_frames_eval_args, cmd_evaluate_frames
-from markerplace.cli.options import plan_config_for_budgets
+from markerplace.cli.options import method_conf_values, plan_config_for_budgets
 from markerplace.errors import UserError
 from markerplace.pipelines.evaluate import RunInputs, evaluate
 from markerplace.pipelines.from_plan import start_from_plan
@@ -45,7 +45,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.frames is not None:
         return cmd_evaluate_frames(args, plan_config_for_budgets(args, config.study.ks), config, inputs.progress)
     if args.plan is not None:
-        start = start_from_plan(args.plan, values_from_args(args, PlanConfig(), "evaluate"), config,
+        given = values_from_args(args, PlanConfig(), "evaluate")
+        given.update(method_conf_values(args.method_conf, PlanConfig(), "evaluate"))
+        start = start_from_plan(args.plan, given, config,
                                 ks_given=args.k is not None, scene=args.scene, up=args.up,
                                 unit_scale=args.unit_scale, seed=args.seed, where=args.where)
         result = evaluate(start.scene_spec, start.plan_config, start.config, args.out, args.placements, inputs,

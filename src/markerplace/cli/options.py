@@ -12,21 +12,25 @@ from __future__ import annotations
 
 import argparse
 import logging
+import tomllib
+from dataclasses import fields, replace
 from typing import Sequence
 
 from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
-from dataclasses import replace
-from markerplace.config_file import read_config_file
+from markerplace.config_file import checked_value, read_config_file
+from markerplace.errors import UserError
 from markerplace.markers import check_tag_budget
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.place.config import K_ALL
+from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
+from markerplace.plan.place.registry import settings_name
 from markerplace.plan.discretize.candidate_rules import parse_allow as parse
-from markerplace.settings import add_setting_args, apply, values_from_args
+from markerplace.settings import add_setting_args, apply, values_from_args, walk
 
 log = logging.getLogger(__name__)
 
 __all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow", "parse_level", "parse_xy",
-           "plan_config_from_args", "plan_config_for_budgets"]
+           "plan_config_from_args", "plan_config_for_budgets", "method_conf_values"]
 
 
 def add_scene_args(p: argparse.ArgumentParser, optional: str | None = None) -> None:
@@ -65,10 +69,51 @@ def plan_config_from_args(args: argparse.Namespace):
         file_k = read.placement.k is not None
         config = read if file_k else apply(read, {"placement.k": config.placement.k})
     given = values_from_args(args, config, command)
+    given.update(method_conf_values(getattr(args, "method_conf", None), apply(config, given), command))
     config = apply(config, given)
     if config.placement.target_recall is not None and not file_k and "placement.k" not in given:
         config = apply(config, {"placement.k": K_ALL})
     return config
+
+
+def method_conf_values(items: Sequence[str] | None, config, command: str = "plan") -> dict:
+    """config path -> value of each ``--method-conf [METHOD.]KEY=VALUE`` (``items``, in the order
+    given; a later one wins): ``KEY`` a field of the method's ``Config``
+    (``placement.methods.<method>.<KEY>``), ``METHOD`` the plan's ``--method`` when left out
+    (``plan`` only: ``evaluate`` and ``study`` name it). ``VALUE`` is read as a TOML value (a
+    number, ``true``/``false``, a list ``[1, 2]``), anything else as a text, and checked as a
+    ``--config`` file's value is (:func:`markerplace.config_file.checked_value`).
+
+    Raises:
+        UserError: one line: no ``=``, an unknown method, a key the method's settings do not
+            have (naming the ones they have), or a bad value.
+    """
+    out: dict = {}
+    for item in items or ():
+        target, eq, text = item.partition("=")
+        target = target.strip()
+        if not eq or not target:
+            raise UserError(f"--method-conf {item!r}: give KEY=VALUE (a setting of --method) or METHOD.KEY=VALUE")
+        head, dot, key = target.rpartition(".")
+        if not dot:
+            if command != "plan":
+                raise UserError(f"--method-conf {item!r}: name the method (METHOD.KEY=VALUE, e.g. omp.v=80): "
+                                f"{command} has no single --method")
+            head, key = config.placement.method, target
+        PLACEMENT_METHODS.lookup(head)  # one line naming the known methods
+        conf = method_conf(head, config.placement)
+        keys = [f.name for f in fields(conf)]
+        if key not in keys:
+            has = f"its settings are {', '.join(keys)}" if keys else "it has no settings of its own"
+            raise UserError(f"--method-conf {item!r}: {head} has no setting {key!r}: {has}")
+        path = f"placement.methods.{settings_name(head)}.{key}"
+        leaf = next(leaf for leaf in walk(config) if leaf.path == path)
+        try:
+            value = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()  # a bare word: a text
+        out[path] = checked_value(leaf, value, "--method-conf")
+    return out
 
 
 def plan_config_for_budgets(args: argparse.Namespace, ks: Sequence[int]):
@@ -91,6 +136,10 @@ def add_plan_args(p: argparse.ArgumentParser, command: str = "plan") -> None:
     disc = p.add_argument_group("discretization")
     placing = p.add_argument_group("scoring and placement")
     add_setting_args(p, PlanConfig(), command, {"discretize": disc, "placement": placing, "runtime": placing})
+    placing.add_argument("--method-conf", action="append", metavar="[METHOD.]KEY=VALUE",
+                         help="a setting of a placement method's own (its [placement.methods.METHOD] table), e.g. "
+                              "v=80 or expected-recall.calibration_runs=5; METHOD defaults to --method (plan); "
+                              "repeat it for more")
     placing.add_argument("--force", action="store_true",
                          help="run even when the size guard estimates more poses, memory or time than the limits "
                               "(200,000 poses, 80%% of this machine's memory, 12 h), or loading the model file more "

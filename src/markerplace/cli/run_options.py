@@ -22,6 +22,12 @@ _COMMON_RUN_OPTIONS = {
                        "already there are never replaced or deleted (see [Run folders](#run-folders-what-markerplace-"
                        "writes-and-deletes))"),
     "--quiet": ("off", None),
+    "--method-conf": ("none", "`[METHOD.]KEY=VALUE`: a setting of a placement method's own `Config` (the table "
+                              "`[placement.methods.METHOD]` of a `--config` file, see [Settings files]"
+                              "(#settings-files-plan---config)), e.g. `v=80` or `expected-recall.calibration_runs=5`; "
+                              "METHOD (with `-`) defaults to `--method` in `plan` and must be given in `evaluate` and "
+                              "`study`; repeat it for more; a key the method does not have is refused with its "
+                              "keys"),
 }
 
 RUN_OPTIONS: dict[str, dict[str, tuple[str | None, str | None] | None]] = {

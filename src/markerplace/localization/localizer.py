@@ -16,11 +16,11 @@ Pipeline for one query RGB image:
 5. P3P RANSAC + LM (:func:`estimate_pose`).
 
 Localizers are chosen by name from :data:`LOCALIZERS` (:mod:`markerplace.registry`); this
-pipeline is ``sift_pnp`` (:class:`Localizer`, settings :class:`LocalizerConfig`). Adding one: a
-class in this file with ``name``, ``summary``, a frozen ``Config`` and ``default_conf``, built as
-``cls(db, K, config=None, **overrides)``, with :meth:`Localizer.localize` and
+pipeline is ``sift_pnp`` (:class:`SiftPnP`, settings :class:`LocalizerConfig`). Adding one: a
+subclass of :class:`Localizer` (``name``, ``summary``, a frozen ``Config`` subclassing
+:class:`LocalizerSettings`, whose fields the testbed sets, and ``default_conf``) with
 :meth:`Localizer.localize_features` returning :class:`LocalizationResult`, decorated with
-``@LOCALIZERS.register``; :func:`get_localizer` finds it by name.
+``@LOCALIZERS.register`` (which refuses any other class); :func:`get_localizer` finds it by name.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import cv2
 import numpy as np
@@ -41,35 +42,44 @@ from markerplace.localization.vlad import nearest_by_similarity
 
 log = logging.getLogger(__name__)
 
-#: Every localizer by name, in registration order.
-LOCALIZERS = Registry("localizer", "--localizer")
+@dataclass(frozen=True)
+class LocalizerSettings:
+    """The settings every localizer has, which the testbed sets (its
+    :class:`~markerplace.testbed.config.LocalizationConfig` and seed,
+    :func:`markerplace.testbed.map_setup.localizer_spec`).
+
+    Attributes:
+        use_tags: use the query's tag detections (``evaluate --no-tags`` turns it off).
+        tag_corners: also use detected tag corners as 2D-3D correspondences (``--tag-corners``).
+        seed: seed of any randomness of the localizer (RANSAC).
+    """
+
+    use_tags: bool = True
+    tag_corners: bool = False
+    seed: int = 0
 
 
 @dataclass(frozen=True)
-class LocalizerConfig:
-    """Localization parameters (paper defaults, docs/design.md section 3).
+class LocalizerConfig(LocalizerSettings):
+    """Settings of ``sift_pnp`` (paper defaults, docs/design.md section 3), besides
+    :class:`LocalizerSettings`' (``use_tags``: tags in retrieval, the paper's "marker
+    detection"; ``tag_corners``: off in the paper; ``seed``: RANSAC's).
 
     Attributes:
         num_candidates: map images retrieved per query (paper: 10).
         ratio: Lowe's ratio test threshold (paper: 0.8).
-        use_tags: use tag detection for retrieval (the paper's "marker detection").
-        tag_corners: also use detected tag corners as 2D-3D correspondences (off in the paper).
         tag_pose_radius_m: map poses within this distance of a tag-implied pose are candidates.
         tag_pose_angle_deg: ... and whose optical axis is within this angle of it.
         sift: query-side SIFT parameters (OpenCV defaults).
         pnp: RANSAC/refinement parameters.
-        seed: seed of the RANSAC RNG.
     """
 
     num_candidates: int = 10
     ratio: float = 0.8
-    use_tags: bool = True
-    tag_corners: bool = False
     tag_pose_radius_m: float = 2.0
     tag_pose_angle_deg: float = 60.0
     sift: SiftConfig = SIFT_DEFAULT
     pnp: PnPConfig = field(default_factory=PnPConfig)
-    seed: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,27 +107,84 @@ class LocalizationResult:
         return self.world_from_cam is not None
 
 
-@LOCALIZERS.register
 class Localizer:
-    """Localizes query images of intrinsics ``K`` (3, 3) against ``db`` (the pipeline of the
-    module docstring).
+    """Base class of localizers: localizes query images of intrinsics ``K`` (3, 3) against ``db``.
+
+    Class attributes:
+        name: registry name (``evaluate --localizer NAME``).
+        summary: a few words for help texts.
+        Config: a frozen dataclass subclassing :class:`LocalizerSettings`; ``default_conf``
+            an instance.
+        replays_retrieval: for a query that sees no tag, the map images it matches against
+            are the ``config.num_candidates`` (a field of its ``Config``) of highest VLAD
+            similarity, after ``exclude``: then the testbed may replay that retrieval to reuse
+            the marker-free result of a query no placement changes
+            (:class:`markerplace.testbed.predict.Retrieval`). False: every query is localized.
 
     Args:
         db: the map (images with SIFT features, 3D points, VLAD vectors, tags seen).
         K: (3, 3) pinhole matrix of the queries, pixels.
         config: settings; None = :attr:`default_conf`.
-        **overrides: fields of :class:`LocalizerConfig` replaced in ``config``.
+        **overrides: fields of ``Config`` replaced in ``config``.
     """
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    Config: ClassVar[type] = LocalizerSettings
+    default_conf: ClassVar = LocalizerSettings()
+    replays_retrieval: ClassVar[bool] = False
+
+    def __init__(self, db: MapDatabase, K: np.ndarray, config: LocalizerSettings | None = None, **overrides):
+        self.db = db
+        self.K = np.asarray(K, dtype=np.float64)
+        self.config = configure(self.default_conf if config is None else config, overrides)
+
+    def localize(self, rgb: np.ndarray) -> LocalizationResult:
+        """Estimate the ``world_from_cam`` of an (H, W, 3) uint8 RGB query image: OpenCV-default
+        SIFT and (with ``use_tags`` or ``tag_corners``) tag detection, then
+        :meth:`localize_features`."""
+        c = self.config
+        t0 = time.perf_counter()
+        kp, desc = extract_sift(rgb, SIFT_DEFAULT)
+        tags = detect_tags(rgb) if (c.use_tags or c.tag_corners) else []
+        result = self.localize_features(kp, desc, tags)
+        result.timing.update(total=time.perf_counter() - t0)
+        return result
+
+    def localize_features(self, keypoints: np.ndarray, descriptors: np.ndarray,
+                          tags: list[TagDetection], exclude=None) -> LocalizationResult:
+        """Localize precomputed query features (what the testbed calls).
+
+        Args:
+            keypoints: (K, 2) pixel xy of the query's SIFT keypoints.
+            descriptors: (K, 128) float32 SIFT descriptors (OpenCV defaults).
+            tags: tag detections in the query (to be ignored unless ``use_tags`` or
+                ``tag_corners`` is on).
+            exclude: map image indices never used (a map image localized against the rest of
+                the map leaves its own location out).
+
+        Returns:
+            the estimate (``world_from_cam`` None on failure) with retrieval and match details.
+        """
+        raise NotImplementedError
+
+
+LOCALIZERS = Registry("localizer", "--localizer", base=Localizer)
+"""Every localizer by name, in registration order (each a :class:`Localizer`)."""
+
+
+@LOCALIZERS.register
+class SiftPnP(Localizer):
+    """The paper's localizer (the pipeline of the module docstring)."""
 
     name = "sift_pnp"
     summary = "tags and VLAD retrieval, SIFT matching, P3P RANSAC + LM, as in the paper"
     Config = LocalizerConfig
     default_conf = LocalizerConfig()
+    replays_retrieval = True
 
     def __init__(self, db: MapDatabase, K: np.ndarray, config: LocalizerConfig | None = None, **overrides):
-        self.db = db
-        self.K = np.asarray(K, dtype=np.float64)
-        self.config = configure(self.default_conf if config is None else config, overrides)
+        super().__init__(db, K, config, **overrides)
         self._centres = db.poses[:, :3, 3] if len(db) else np.zeros((0, 3))
         self._axes = db.poses[:, :3, 2] if len(db) else np.zeros((0, 3))
 
@@ -218,17 +285,8 @@ class Localizer:
 
     def localize_features(self, keypoints: np.ndarray, descriptors: np.ndarray,
                           tags: list[TagDetection], exclude=None) -> LocalizationResult:
-        """Localize precomputed query features.
-
-        Args:
-            keypoints: (K, 2) pixel xy of the query's SIFT keypoints.
-            descriptors: (K, 128) float32 SIFT descriptors (``config.sift`` parameters).
-            tags: tag detections in the query (ignored unless tags or tag corners are on).
-            exclude: map image indices left out of retrieval (see :meth:`retrieve`).
-
-        Returns:
-            the estimate (``world_from_cam`` None on failure) with retrieval and match details.
-        """
+        """:meth:`Localizer.localize_features` (descriptors of ``config.sift``'s parameters;
+        ``exclude``: see :meth:`retrieve`)."""
         c = self.config
         timing: dict[str, float] = {}
         t2 = time.perf_counter()

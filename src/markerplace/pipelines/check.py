@@ -51,12 +51,13 @@ def _warn_off_wall(scene, markers) -> None:
 
 
 def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | Path | None = None, *,
-              radius: float | None = None, workers: int = 1, progress: bool = True,
+              radius: float | None = None, runtime: RuntimeConfig = RuntimeConfig(), progress: bool = True,
               adopt: bool = False) -> tuple[Path, str]:
     """Compare the measured tags with the plan in ``plan_dir``; write the outputs to ``out_dir``
     (default ``plan_dir/check``). Both are run folders (locked; ``adopt``: one markerplace did
     not make is used, its files left alone; :mod:`markerplace.runtime.run_folder`). Returns the
-    folder and the text summary printed by the CLI."""
+    folder and the text summary printed by the CLI. ``runtime``: where the depth renders run
+    (``--workers``)."""
     folder = read_plan_folder(plan_dir)
     installed_user = load_installed(installed_path, folder.config.placement.tag_size)
     out = Path(out_dir) if out_dir is not None else folder.path / "check"
@@ -74,7 +75,7 @@ def run_check(plan_dir: str | Path, installed_path: str | Path, out_dir: str | P
     installed = markers_to_internal(installed_user, offset)
     _warn_off_wall(scene, installed)
     existing = markers_to_internal(folder.existing, offset)
-    ex = make_executor(RuntimeConfig(workers=workers))
+    ex = make_executor(runtime)
     try:
         data = prepare(spec, config, folder.path, existing=existing, progress=progress, executor=ex)
         planned, cands = folder.planned_on_candidates(data.disc.candidate_world_from_marker, offset)

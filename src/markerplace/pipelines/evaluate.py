@@ -40,7 +40,6 @@ from markerplace.pipelines.plan import prepare
 from markerplace.pipelines.size_guard import check_first_guess
 from markerplace.plan.config import validate
 from markerplace.plan.folder import PlanFolder
-from markerplace.plan.place.predicted import RECALL_MODEL
 from markerplace.plan.where import Where
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json
@@ -135,7 +134,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         t0 = time.perf_counter()
         data = prepare(scene_spec, plan_config, work / "plan", progress=progress, executor=executor,
                        k=max(config.study.ks), where=where, map_cache=cache_dir, map_imaging=imaging_config)
-        models = config.study.methods + ((RECALL_MODEL,) if diag.predicted else ())  # --predicted: the plans' model
+        models = config.study.methods + ((plan_config.placement.recall_model,) if diag.predicted else ())  # --predicted: the plans' model
         calibrate_plan(scene_spec, data, plan_config, work / "plan", executor, models, progress,
                        cache_dir=cache_dir, imaging_config=imaging_config)
         timings["plan_prepare"] = time.perf_counter() - t0
@@ -172,7 +171,8 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
     t0 = time.perf_counter()
     test_predictions = {key: est for key, est in predictions.items()
                         if key.method != SINGLE and split_set(key.test_set)[0] in test_poses}
-    predicted = predict_recalls(data, placements, test_poses, plan_config.placement.tag_size) \
+    predicted = predict_recalls(data, placements, test_poses, plan_config.placement.tag_size,
+                                plan_config.placement.recall_model) \
         if diag.predicted else None
     rows, summary = write_outputs(out, scene.name, placements, test_predictions, test_poses, data.base_score, config,
                                   plan_config, scene=scene, where=None if where is None else where.doc,

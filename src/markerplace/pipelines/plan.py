@@ -39,6 +39,7 @@ from markerplace.plan.types import PlanData
 from markerplace.plan.where import Where, disc_pose_weights, load_where
 from markerplace.report.plan_outputs import write_plan_outputs
 from markerplace.report.plan_report import write_plan_report
+from markerplace.report.output_files import output_file_patterns
 from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
 from markerplace.runtime.claims import refuse_foreign
@@ -51,14 +52,21 @@ from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_c
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan", "PLAN_OUTPUTS"]
+__all__ = ["PlanInputs", "PlanResult", "prepare", "run_plan", "PLAN_OUTPUTS", "plan_outputs"]
 
 PLAN_OUTPUTS = ("discretization.npz", "discretization.npz.meta.json", "observations/*.npy", "observations.meta.json",
                 "similarity.npz", "similarity.npz.meta.json", "calibration/", "success_model_*.json*",
                 "placement.json", "placement.csv", "tags/*_tag*.svg", "tags.pdf", "scores.npz", "config.json",
                 "scores.png", "gain_first.png", "placement.png", "where.png", "report.html", *tag_map_patterns())
 """What ``plan`` writes into its folder (``fnmatch`` patterns; ``/``: a folder), checked in an
-adopted folder before any work (:func:`markerplace.runtime.claims.refuse_foreign`)."""
+adopted folder before any work (:func:`markerplace.runtime.claims.refuse_foreign`); with the
+registered parts' files: :func:`plan_outputs`."""
+
+
+def plan_outputs() -> tuple[str, ...]:
+    """:data:`PLAN_OUTPUTS` with the files of the tag-map formats and output files registered now
+    (:mod:`markerplace.report.output_files`)."""
+    return tuple(dict.fromkeys((*PLAN_OUTPUTS, *tag_map_patterns(), *output_file_patterns())))
 
 
 def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, existing: Sequence[Marker] = (),
@@ -170,7 +178,7 @@ def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs:
     where = load_where(inputs.where) if inputs.where else None
     previous = previous_markers(out, scene_spec.spec)  # to say what this run changes
     run_folder.open_run_folder(out, "plan", adopt=inputs.adopt)
-    refuse_foreign(out, PLAN_OUTPUTS)  # a file of the user's named like an output: refused now, not at the end
+    refuse_foreign(out, plan_outputs())  # a file of the user's named like an output: refused now, not at the end
     if config.runtime.cluster:
         check_scheduler(config.runtime.cluster)  # something answers there, before any work
     scene = scene_spec.load()

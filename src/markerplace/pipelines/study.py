@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
-from markerplace.settings import setting
+from markerplace.settings import apply, setting
 from markerplace.validation import parse_float_list
 from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
 from markerplace.pipelines.evaluate import (RUN_OUTPUTS, STAGE_OUTPUTS, RunInputs, open_evaluation_folder,
@@ -97,8 +97,8 @@ def _omp_variants(scene_spec, plan_config, work: Path, plan: StudyPlan, progress
     """OMP placements with the other v values and without similarity (internal frame)."""
     k = plan_config.placement.k
     data = prepare(scene_spec, plan_config, work / "plan", progress=progress, k=k)
-    out = {f"omp-v{v:g}": place(data, replace(plan_config.placement, method="omp", v=v, k=k), progress=False).markers
-           for v in plan.vs}
+    out = {f"omp-v{v:g}": place(data, apply(plan_config.placement, {"method": "omp", "k": k, "methods.omp.v": v}),
+                                progress=False).markers for v in plan.vs}
     if plan.similarity_off:
         nosim = replace(plan_config, placement=replace(plan_config.placement, similarity=False))
         data = prepare(scene_spec, nosim, work / "plan", progress=progress)
@@ -189,7 +189,7 @@ def run_study(scene_spec, plan_config, config, out_dir: str | Path, plan: StudyP
     hits = {name: {ts: _hits(out / "runs" / name, ts, threshold) for ts in cfg.test.sets}
             for name, cfg in runs.items()}
     default_w = hits["default"]["weighted"]
-    groups = _groups(hits, plan, plan_config.placement.v)
+    groups = _groups(hits, plan, plan_config.placement.methods.omp.v)
     md = _markdown(groups, default_w, ks, label, config.seed)
     _write_csv(out / "study.csv", groups, ks)
     _figures(out, groups, ks, label)

@@ -9,18 +9,20 @@ Each stage takes only its own sub-config (:class:`~markerplace.plan.discretize.s
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from markerplace.errors import UserError
 from markerplace.imaging.config import ImagingConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
-from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
-from markerplace.plan.place.methods import PLACEMENT_METHODS
-from markerplace.plan.place.predicted import wants_success_model
+from markerplace.plan.place.config import PlacementConfig
+from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
+from markerplace.plan.place.registry import settings_name
+from markerplace.plan.place.predicted import model_methods
 from markerplace.plan.score.localizability import NoiseConfig
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.runtime.executor import RuntimeConfig
+from markerplace.settings import NO_CONST, walk
 from markerplace.validation import check_plan_config
 
 __all__ = ["PlanConfig", "PlacementConfig", "validate", "warn_unused_settings"]
@@ -52,8 +54,10 @@ def validate(config: PlanConfig) -> None:
     p = config.placement
     PLACEMENT_METHODS.lookup(p.method)  # UserError naming the known ones
     MARKER_MODELS.lookup(p.marker_model)
-    if p.calibration_poses not in CALIBRATION_POSES:
-        raise UserError(f"--calibration-poses {p.calibration_poses!r} is not one of {', '.join(CALIBRATION_POSES)}")
+    if not PLACEMENT_METHODS.lookup(p.recall_model).calibrated:
+        calibrated = ", ".join(n for n, c in PLACEMENT_METHODS.items() if c.calibrated)
+        raise UserError(f"placement.recall_model {p.recall_model!r} is not a calibrated method: use one of {calibrated}")
+    check_choices(config)
     check_plan_config(config)  # every numeric setting: finite and in range (markerplace.validation)
     if p.target_recall is not None:
         if not p.target_recall > 0.0:
@@ -65,9 +69,28 @@ def validate(config: PlanConfig) -> None:
                             f"not --method {p.method}")
 
 
+def check_choices(config) -> None:
+    """Raise a one-line :class:`UserError` for a setting of ``config`` that is not one of its
+    choices (a config built in code or read from ``config.json``; flags and ``--config`` files
+    are checked as they are read)."""
+    for leaf in walk(config):
+        s = leaf.setting
+        if s.choices is not None and s.const is NO_CONST and leaf.value not in tuple(s.choices()):
+            raise UserError(f"{s.flag or leaf.path} {leaf.value!r} is not one of {', '.join(s.choices())}")
+
+
 def warn_unused_settings(config: PlanConfig) -> None:
-    """Log a warning for each setting that has no effect with the chosen method."""
+    """Log a warning for each method setting that has no effect: one of a method the plan
+    neither places nor calibrates (:func:`~markerplace.plan.place.predicted.model_methods`)."""
     p = config.placement
-    if p.calibration_poses != "map" and not wants_success_model(p):
-        log.warning("--calibration-poses %s has no effect with --method %s (it fits expected-recall's success "
-                    "model; so do --target-recall and --recall-curve)", p.calibration_poses, p.method)
+    used = set(model_methods(p))
+    for name, cls in PLACEMENT_METHODS.items():
+        conf = method_conf(name, p)
+        if name in used or conf == cls.default_conf:
+            continue
+        flags = {leaf.path: leaf.setting.flag for leaf in walk(conf)}
+        changed = [f"{flags.get(f.name) or f'placement.methods.{settings_name(name)}.{f.name} ='} "
+                   f"{getattr(conf, f.name)}" for f in fields(conf)
+                   if getattr(conf, f.name) != getattr(cls.default_conf, f.name)]
+        log.warning("%s has no effect with --method %s (a setting of %s, which this plan neither places nor "
+                    "calibrates)", ", ".join(changed), p.method, name)

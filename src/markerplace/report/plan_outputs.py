@@ -20,6 +20,7 @@ from markerplace.report.instructions import install_to_frame
 from markerplace.report.sheets import sheet_plan
 from markerplace.report.printable import write_tag_sheets
 from dataclasses import replace
+from markerplace.report.output_files import PlanOutputs, write_output_files
 from markerplace.report.deliverables import write_deliverables
 from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row, install_instructions
 from markerplace.scene.worldframe import discretization_to_user, markers_to_user
@@ -156,6 +157,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     write_placement(out_dir, records, scene_source, method, {"summary": summary, **(predicted or {})})
 
     write_deliverables(out_dir, records, placement.markers, existing, disc, scene_source, scene_options, paper)
+    write_output_files(out_dir, PlanOutputs(scene_source, method, records, placement.markers, existing, summary))
     write_npz(out_dir / "scores.npz", world_from_cam=disc.world_from_cam, location_index=disc.location_index,
               locations=disc.locations, score_before=data.base_score, score_after=score_after,
               first_pick_gain=first_gain, candidates=placement.candidates, gains=placement.gains,

@@ -50,12 +50,17 @@ __all__ = ["RuntimeConfig", "WorkerJob", "Executor", "InProcessExecutor", "PoolE
            "make_executor"]
 
 
+_RUN_COMMANDS = ("plan", "evaluate", "study")
+"""The commands with ``--cluster`` (``check`` has ``--workers`` only)."""
+
+
 @dataclass(frozen=True)
 class RuntimeConfig:
     """Where per-image work runs.
 
     Attributes:
-        workers: local processes (0 = CPU count, at most 4; 1 = in this process).
+        workers: local processes (0 = CPU count, at most 4; 1 = in this process): the one
+            ``--workers`` of ``plan``, ``evaluate``, ``study`` and ``check``.
         cluster: None (local processes), ``local:N`` (start a Dask ``LocalCluster`` of N
             workers) or a Dask scheduler address such as ``tcp://10.0.0.5:8786``.
         cluster_wait: with ``cluster``: seconds to wait for a worker when the scheduler has none
@@ -67,11 +72,12 @@ class RuntimeConfig:
                            hint="0 (automatic) or a number of processes, e.g. 2",
                            help="processes for rendering + SIFT, one GL context each (0: the CPU count, at most 4; "
                                 "1: in this process); not with --cluster")
-    cluster: str | None = setting(None, flag="--cluster", metavar="local:N|tcp://HOST:PORT",
+    cluster: str | None = setting(None, flag="--cluster", metavar="local:N|tcp://HOST:PORT", commands=_RUN_COMMANDS,
                                   help="run rendering + SIFT on a Dask cluster: local:N starts N local workers (N up "
                                        "to the CPU count), an address (tcp://HOST:PORT, tls://HOST:PORT) uses a "
                                        "running scheduler (results do not depend on where they run)")
     cluster_wait: float = setting(CLUSTER_WAIT_S, flag="--cluster-wait", metavar="SECONDS", bounds=(0, 86400),
+                                  commands=_RUN_COMMANDS,
                                   units="s", hint="seconds to wait for a Dask worker, e.g. 60",
                                   help="with --cluster: seconds to wait for a Dask worker when the scheduler has none "
                                        "(when the work starts, or after every worker left) before stopping with an error")

@@ -10,7 +10,9 @@ recall threshold (5 cm, 5 deg) of the image's true pose. Only map images take pa
 never touch a fit.
 
 * :func:`calibrate_plan` fills ``PlanData.calibration`` for every calibrated placement method
-  (``expected-recall``): the map images are localized without tags and with
+  (a :class:`~markerplace.plan.place.methods.CalibratedMethod`, e.g. ``expected-recall``; the
+  fields of its :class:`~markerplace.plan.place.methods.CalibrationConfig` are the fit's
+  settings): the map images are localized without tags and with
   ``calibration_runs`` seeded random sets of ``calibration_k`` candidate tags, and a
   :class:`~markerplace.plan.score.success_model.SuccessModel` is fitted on the pairs (score under the
   method's marker model, success): every map image without tags, plus with each set the images
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +55,7 @@ from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_ba
 from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
 from markerplace.testbed.predict import ImageSet, PredictContext, predict_placements
 from markerplace.plan.place.greedy import apply_coverages
-from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
+from markerplace.plan.place.methods import PLACEMENT_METHODS, CalibratedMethod, CalibrationConfig, method_conf
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel, fit_success_model
@@ -173,9 +175,10 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
     folder = run_dir / "calibration" if cache_dir is None else Path(cache_dir)
     for name in dict.fromkeys(names):
         cls = PLACEMENT_METHODS.get(name)
-        if cls is None or not cls.calibrated or name in data.calibration:
+        if cls is None or not issubclass(cls, CalibratedMethod) or name in data.calibration:
             continue
-        conf = method_named(name, plan_config.placement).conf
+        own = method_conf(name, plan_config.placement)
+        conf = CalibrationConfig(**{f.name: getattr(own, f.name) for f in fields(CalibrationConfig)})  # the fit's
         offgrid = conf.calibration_poses == "offgrid"
         covs = coverages_with_model(data, conf.tag_model, plan_config.noise, plan_config.imaging.camera.K)
         C = data.num_candidates
@@ -190,8 +193,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         map_poses = np.asarray(data.disc.world_from_cam, float)
         base_key = map_base_key(scene_spec.load(), map_poses)
         tag_size = plan_config.placement.tag_size
-        fit_conf = replace(conf, target_recall=None)  # where the greedy stops is no part of the fit
-        fit_conf = fit_conf if offgrid else replace(fit_conf, calibration_images=0)  # unused by a map fit
+        fit_conf = conf if offgrid else replace(conf, calibration_images=0)  # unused by a map fit
         queries = offgrid_poses(data, plan_config.discretize.grid_spacing, conf.calibration_images,
                                 conf.calibration_seed) if offgrid else None
         key = cache.hash_of("calibration-v2", base_key, imaging, lcfg, localization.vlad_clusters, data.base_score,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -23,6 +23,7 @@ from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
 from markerplace.plan.observe import MapOutput
 from markerplace.testbed.images import BaseImages, TestbedImaging, base_features_key
 from markerplace.testbed.predict import ImageSet, PredictContext
+from markerplace.localization.localizer import LocalizerSettings
 from markerplace.localization.vlad import VladCodebook
 
 log = logging.getLogger(__name__)
@@ -39,10 +40,11 @@ def testbed_imaging_config(plan_config, imaging_config=None):
 
 def localizer_spec(localization, seed: int) -> tuple:
     """(registered localizer name, its settings) from a
-    :class:`~markerplace.testbed.config.LocalizationConfig` and the RANSAC seed (hashable: part
-    of cache keys)."""
-    return localization.localizer, (("use_tags", localization.use_tags), ("tag_corners", localization.tag_corners),
-                                    ("seed", int(seed)))
+    :class:`~markerplace.testbed.config.LocalizationConfig` and the localizer's seed: the
+    fields of :class:`~markerplace.localization.localizer.LocalizerSettings`, which every
+    localizer's ``Config`` has, as (name, value) pairs (hashable: part of cache keys)."""
+    settings = LocalizerSettings(use_tags=localization.use_tags, tag_corners=localization.tag_corners, seed=int(seed))
+    return localization.localizer, tuple((f.name, getattr(settings, f.name)) for f in fields(settings))
 
 
 def map_base_key(scene, map_poses: np.ndarray) -> str:

@@ -93,7 +93,7 @@ class Retrieval:
 
     def candidates(self, vlad: np.ndarray, query: np.ndarray, exclude: Sequence[int] = ()) -> tuple:
         """The localizer's VLAD-only retrieval of ``query`` against the rows of ``vlad``,
-        leaving out ``exclude`` (as :meth:`~markerplace.localization.localizer.Localizer.retrieve`)."""
+        leaving out ``exclude`` (as :meth:`~markerplace.localization.localizer.SiftPnP.retrieve`)."""
         skip = set(int(i) for i in exclude)
         order = nearest(vlad, query, self.n + len(skip))[0]
         return tuple(int(i) for i in order if int(i) not in skip)[:self.n]
@@ -343,9 +343,10 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
     predictions: dict[PredictionKey, np.ndarray] = {}
 
     name, settings = lcfg
-    conf = configure(LOCALIZERS.lookup(name).default_conf, dict(settings))
+    localizer = LOCALIZERS.lookup(name)
+    conf = configure(localizer.default_conf, dict(settings))
     retrieval = None
-    if ctx.reuse and name == "sift_pnp" and map_base.world_from_cam.size:
+    if ctx.reuse and localizer.replays_retrieval and map_base.world_from_cam.size:
         retrieval = Retrieval(codebook, map_base, conf.num_candidates)
     store = RenderStore(cache_dir / "renders") if ctx.keep_renders else None
     maps = PlacementMaps(tb, map_base, codebook, retrieval, store)

@@ -1,6 +1,6 @@
 """What the success model predicts for each evaluated placement (``evaluate --predicted``).
 
-The model is the one plans use (:data:`markerplace.plan.place.predicted.RECALL_MODEL`, fitted on
+The model is the one plans use (their ``placement.recall_model``'s, fitted on
 map images by :func:`markerplace.testbed.calibration.calibrate_plan`; test images never touch
 it), and so is the prediction: :func:`markerplace.plan.place.predicted.marker_set_curve`, the
 weighted mean over the N feasible poses of P(success | score with the placement's tags). What
@@ -58,14 +58,15 @@ def drawn_weights(num_poses: int, source_index: np.ndarray) -> np.ndarray:
     return counts * (num_poses / counts.sum())
 
 
-def predict_recalls(data, placements, test_poses: dict, tag_size: float) -> dict:
+def predict_recalls(data, placements, test_poses: dict, tag_size: float, model: str) -> dict:
     """Predicted recall of every placement on every test set.
 
     Args:
-        data: the prepared plan with the success model fitted (``data.calibration[RECALL_MODEL]``).
+        data: the prepared plan with the success model fitted (``data.calibration[model]``).
         placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
         test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses`.
         tag_size: the planned tag size (metres): a marker of another size is no candidate.
+        model: the calibrated method whose success model predicts (the plan's ``recall_model``).
 
     Returns:
         (test set, method, run, k) -> (predicted, predicted on the drawn poses), shares in [0, 1].
@@ -85,6 +86,6 @@ def predict_recalls(data, placements, test_poses: dict, tag_size: float) -> dict
         for ts, (w_set, w_drawn) in weights.items():
             if p.test_sets is not None and ts not in p.test_sets:
                 continue
-            out[(ts, p.method, p.run, p.k)] = (float(marker_set_curve(data, cands, w_set)[-1]),
-                                               float(marker_set_curve(data, cands, w_drawn)[-1]))
+            out[(ts, p.method, p.run, p.k)] = (float(marker_set_curve(data, cands, w_set, model)[-1]),
+                                               float(marker_set_curve(data, cands, w_drawn, model)[-1]))
     return out

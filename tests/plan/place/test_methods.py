@@ -16,6 +16,7 @@ from markerplace.plan.config import PlanConfig, validate
 from markerplace.plan.place.config import PlacementConfig
 from markerplace.plan.place.stage import place
 from markerplace.plan.types import PlanData
+from markerplace.settings import apply
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.place.methods import (
     OMP,
@@ -62,10 +63,16 @@ def test_unknown_method_is_a_one_line_user_error():
         validate(PlanConfig(placement=PlacementConfig(marker_model="x")))
 
 
+def _omp(k: int = 20, **omp) -> PlacementConfig:
+    """A PlacementConfig of OMP with ``omp`` (its settings) in ``methods.omp``."""
+    return apply(PlacementConfig(k=k, method="omp"), {f"methods.omp.{key}": v for key, v in omp.items()})
+
+
 def test_method_settings_come_from_placement_config():
-    m = method_from_config(PlacementConfig(v=55.0, lazy=False))
+    m = method_from_config(_omp(v=55.0, lazy=False))
     assert isinstance(m, OMP) and m.conf == OMP.Config(v=55.0, lazy=False)
-    assert PlacementConfig().v == OMP.default_conf.v and PlacementConfig().lazy == OMP.default_conf.lazy
+    assert PlacementConfig().methods.omp == OMP.default_conf  # the one home of OMP's settings
+    assert not any(hasattr(PlacementConfig(), key) for key in ("v", "lazy", "calibration_poses"))
     assert get_placement_method("omp", v=10.0).conf.v == 10.0
     with pytest.raises(TypeError):
         get_placement_method("random", v=10.0)
@@ -75,7 +82,7 @@ def test_method_settings_come_from_placement_config():
 def test_omp_through_the_registry_is_omp_greedy(v, lazy):
     data = _data(1)
     C = data.num_candidates
-    pl = place(data, PlacementConfig(k=5, method="omp", v=v, lazy=lazy), progress=False)
+    pl = place(data, _omp(k=5, v=v, lazy=lazy), progress=False)
     ref = omp_greedy(data.base_info, data.coverages[:C], 5, v=v, lazy=lazy, existing=data.coverages[C:])
     assert pl.candidates.tolist() == ref.order and pl.candidates.dtype == np.int64
     np.testing.assert_array_equal(pl.gains, ref.gains)
@@ -118,12 +125,12 @@ class ToyMethod(PlacementMethod):
 
     @dataclass(frozen=True)
     class Config:
-        v: float = 0.0  # shares PlacementConfig.v
+        v: float = 0.0  # its own v, not OMP's (--method-conf v=..., [placement.methods.toy])
         skip: int = 0
 
     default_conf = Config()
 
-    def place(self, data, k, seed=0, progress=False):
+    def place(self, data, k, seed=0, progress=False, target=None):
         C = data.num_candidates
         order = np.arange(C - 1 - self.conf.skip, C - 1 - self.conf.skip - k, -1, dtype=np.int64)
         return Choice(order, np.full(k, self.conf.v), float("nan"),
@@ -136,7 +143,7 @@ class ToyRandom(ToyMethod):
     label = ""
     randomized = True
 
-    def place(self, data, k, seed=0, progress=False):
+    def place(self, data, k, seed=0, progress=False, target=None):
         order = np.random.default_rng(seed).permutation(data.num_candidates)[:k].astype(np.int64)
         return Choice(order, np.full(k, np.nan), float("nan"), data.base_info.copy())
 
@@ -155,11 +162,13 @@ def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, ca
     from markerplace.testbed.reporting.tables import display_name, method_table
 
     data = _data(4)
-    args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--method", "toy", "-v", "7", "-k", "3"])
+    args = build_parser().parse_args(["plan", "tiny", "--out", "unused", "--method", "toy", "--method-conf", "v=7",
+                                      "-v", "50", "-k", "3"])
     config = plan_config_from_args(args)
     validate(config)
     pl = place(data, config.placement, progress=False)
-    assert pl.candidates.tolist() == [13, 12, 11] and pl.gains.tolist() == [7.0] * 3  # v from PlacementConfig
+    assert pl.candidates.tolist() == [13, 12, 11] and pl.gains.tolist() == [7.0] * 3  # the toy's own v
+    assert config.placement.methods.omp.v == 50.0 and config.placement.methods.toy == ToyMethod.Config(v=7.0)
     with pytest.raises(SystemExit):
         build_parser().parse_args(["plan", "--help"])
     assert "toy (last candidates first)" in " ".join(capsys.readouterr().out.split())

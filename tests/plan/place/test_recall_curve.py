@@ -19,7 +19,7 @@ from markerplace.plan.place.bounds import (per_pose_bound_scores, recall_upper_b
 from markerplace.plan.place.config import K_ALL, PlacementConfig
 from markerplace.plan.place.expected_recall import expected_localized, expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages
-from markerplace.plan.place.predicted import (HOW_TO_GET, RECALL_MODEL, place_for_target, predicted_recall,
+from markerplace.plan.place.predicted import (HOW_TO_GET, place_for_target, predicted_recall,
                                               score_bound, wants_success_model)
 from markerplace.plan.place.recall_curve import knee, recall_curve, target_count
 from markerplace.plan.place.stage import place
@@ -121,7 +121,7 @@ def test_place_for_target_cuts_the_plan_and_says_when_it_cannot(caplog):
     for method in ("omp", "expected-recall"):
         conf = PlacementConfig(method=method, k=K_ALL, target_recall=0.5)
         full = place_for_target(data, replace(conf, target_recall=1.0), progress=False)[0]
-        curve = recall_curve(data.base_info, data.coverages, full.candidates, data.calibration[RECALL_MODEL]["model"])
+        curve = recall_curve(data.base_info, data.coverages, full.candidates, data.calibration[conf.recall_model]["model"])
         R = float(curve[2] + curve[3]) / 2
         placement, info = place_for_target(data, replace(conf, target_recall=R), progress=False)
         assert info["reached"] and info["tags"] == 3 and len(placement.markers) == 3

@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from markerplace.markers import DEFAULT_TAG_SIZE
-from markerplace.plan.place.registry import PLACEMENT_METHODS
+from markerplace.plan.place.registry import PLACEMENT_METHODS, method_settings
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.settings import SEED_MAX, setting
-
-CALIBRATION_POSES = ("map", "offgrid")
-"""Images ``expected-recall`` may fit its success model on (``--calibration-poses``)."""
 
 K_ALL = 10_000
 """``k`` of a ``--target-recall`` plan given no ``-k``: the largest -k, so that only the
@@ -26,22 +23,15 @@ class PlacementConfig:
         method: a name in :data:`~markerplace.plan.place.methods.PLACEMENT_METHODS`: ``omp`` (the
             paper's greedy), ``random`` (seeded uniform sample of candidates) or ``uniform``
             (evenly spaced along the free-space perimeter).
-        v: OMP hyper-parameter in [0, 100]: the most visible v percent of candidates compete.
         marker_model: a name in :data:`~markerplace.plan.score.marker_models.MARKER_MODELS`:
             ``paper`` (relative-pose factor, as published) or ``corners`` (projected tag
             corners; depends on distance, viewing angle and tag size).
         tag_size: black-square edge of the printed tags, metres: the one home of the tag size
             (the discretization's fit check, the scoring and the placed markers use it).
         similarity: down-weight look-alike points (the paper's similarity analysis).
-        lazy: lazy greedy (exactly the same picks as plain greedy, far fewer evaluations).
         seed: seed of the randomized methods (random and uniform).
         first_tag_id: tag id of the first placed marker; ids count up in placement order,
             skipping ids of existing markers.
-        calibration_poses: images ``expected-recall`` fits its success model on (map images
-            only, never test images): ``map`` (the map images, each localized against the map
-            without its own location) or ``offgrid`` (renders at test-like poses, map poses
-            perturbed within a grid cell and +-22.5 deg of yaw, localized against the whole
-            map; :mod:`markerplace.testbed.calibration`).
         target_recall: place tags until the predicted recall (share of feasible camera poses
             predicted to localize under the success model fitted on the map images,
             :mod:`markerplace.plan.place.recall_curve`) reaches this share, in (0, 1]; ``k`` is
@@ -51,6 +41,16 @@ class PlacementConfig:
             ``placement.json`` show the predicted recall against k (calibration renders and
             localizes the map images: :func:`markerplace.testbed.calibration.calibrate_plan`).
             Always on with ``expected-recall`` or ``target_recall``.
+        recall_model: the calibrated method (a
+            :class:`~markerplace.plan.place.methods.CalibratedMethod`) whose fitted success model
+            predicts the recall of every plan (the recall curve, ``target_recall``,
+            ``evaluate --predicted``).
+        methods: each registered method's own settings (its ``Config``), by method name with
+            ``-`` as ``_`` (:func:`~markerplace.plan.place.registry.method_settings`): the one
+            home of OMP's ``v``, ``expected-recall``'s ``calibration_poses``, ... In a
+            ``--config`` file the table ``[placement.methods.omp]``; on the command line
+            ``--method-conf KEY=VALUE`` (and the flags a method's fields carry, ``-v``,
+            ``--calibration-poses``).
     """
 
     k: int = setting(20, flag="-k", bounds=(1, 10_000), commands=("plan",), help="number of markers to place",
@@ -60,9 +60,6 @@ class PlacementConfig:
                           doc=lambda: "a registered placement method: " + ", ".join(
                               f"`{n}`" + (f" ({c.summary})" if getattr(c, "summary", "") else "")
                               for n, c in PLACEMENT_METHODS.items()))
-    v: float = setting(90.0, flag="-v", bounds=(0.0, 100.0), units="%", hint="a percentage such as 90",
-                       help="OMP percentile parameter v in [0, 100]: the most visible v % of candidates compete "
-                            "(q is derived from v as in the paper)")
     marker_model: str = setting("paper", flag="--marker-model", choices=lambda: MARKER_MODELS.names(),
                                 help=lambda: f"marker information model: {MARKER_MODELS.help()}")
     tag_size: float = setting(DEFAULT_TAG_SIZE, flag="--tag-size", bounds=(0.02, 3.0), units="m",
@@ -72,15 +69,10 @@ class PlacementConfig:
     similarity: bool = setting(True, flag="--no-similarity", const=False,
                                help="turn the look-alike (similarity) analysis off (no down-weighting of repeated "
                                     "features)")
-    lazy: bool = True
     seed: int = setting(0, flag="--placement-seed", bounds=(0, SEED_MAX), hint=f"a seed in 0..{SEED_MAX}, e.g. 0",
                         help=lambda: "seed of the " + "/".join(n for n, c in PLACEMENT_METHODS.items() if c.randomized)
                         + " placements")
     first_tag_id: int = 0
-    calibration_poses: str = setting("map", flag="--calibration-poses", choices=lambda: CALIBRATION_POSES,
-                                     help="images expected-recall fits its success model on: map (the map images, "
-                                          "each without its own location) or offgrid (1000 test-like renders "
-                                          "between the map poses, never test images)")
     target_recall: float | None = setting(
         None, flag="--target-recall", bounds=(0.0, 1.0), commands=("plan",), metavar="R",
         hint="a share of camera poses in (0, 1], e.g. 0.9",
@@ -92,3 +84,6 @@ class PlacementConfig:
         help="fit the success model (renders and localizes the map images) for any method, so that report.html "
              "and placement.json show the predicted recall against the number of tags; always on with "
              "expected-recall or --target-recall")
+    recall_model: str = setting("expected-recall", choices=lambda: tuple(
+        n for n, c in PLACEMENT_METHODS.items() if c.calibrated))
+    methods: object = field(default_factory=method_settings)

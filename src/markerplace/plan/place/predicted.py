@@ -1,8 +1,8 @@
 """What a plan predicts: recall against the number of tags, a recall target, and valid bounds.
 
-The success model is the one ``expected-recall`` fits (:data:`RECALL_MODEL`:
-:func:`markerplace.testbed.calibration.calibrate_plan`, map images only, the method's marker
-model ``corners``). A plan fits it when :func:`wants_success_model` says so: the method is
+The success model is the one the plan's ``recall_model`` fits (a calibrated method, default
+``expected-recall``: :func:`markerplace.testbed.calibration.calibrate_plan`, map images only, the
+method's ``tag_model``, ``corners``). A plan fits it when :func:`wants_success_model` says so: the method is
 calibrated, ``--target-recall`` is given or ``--recall-curve`` asks for it; otherwise the
 predicted-recall part of ``placement.json`` says how to get it (:data:`HOW_TO_GET`).
 
@@ -29,18 +29,15 @@ from markerplace.errors import UserError
 from markerplace.markers import Marker, free_tag_ids
 from markerplace.plan.place.bounds import recall_upper_bound, score_upper_bound
 from markerplace.plan.place.config import PlacementConfig
-from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
+from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
 from markerplace.plan.place.recall_curve import KNEE_POINTS, knee, recall_curve, target_count
 from markerplace.plan.place.stage import place
 from markerplace.plan.types import Placement, PlanData
 
 log = logging.getLogger(__name__)
 
-__all__ = ["HOW_TO_GET", "KNEE_RULE", "RECALL_MODEL", "marker_set_curve", "place_for_target", "predicted_recall",
+__all__ = ["HOW_TO_GET", "KNEE_RULE", "marker_set_curve", "place_for_target", "predicted_recall",
            "score_bound", "wants_success_model"]
-
-RECALL_MODEL = "expected-recall"
-"""The calibrated method whose fitted success model predicts recall for every plan."""
 
 HOW_TO_GET = ("no success model was fitted for this plan: run plan again with --recall-curve (or --method "
               "expected-recall, or --target-recall R) to fit it on the map images and get the predicted recall "
@@ -65,22 +62,23 @@ def wants_success_model(config: PlacementConfig) -> bool:
 
 
 def model_methods(config: PlacementConfig) -> list[str]:
-    """The methods to calibrate for a plan: its own, plus :data:`RECALL_MODEL` when it wants the model."""
-    return [config.method] + ([RECALL_MODEL] if wants_success_model(config) else [])
+    """The methods to calibrate for a plan: its own, plus ``config.recall_model`` when it wants the model."""
+    return [config.method] + ([config.recall_model] if wants_success_model(config) else [])
 
 
-def marker_set_curve(data: PlanData, order: Sequence[int], weights: np.ndarray | None) -> np.ndarray:
+def marker_set_curve(data: PlanData, order: Sequence[int], weights: np.ndarray | None, model: str) -> np.ndarray:
     """(K + 1,) predicted recall R(0..K) after the first j candidates of ``order`` (indices, any
-    order) under the fitted success model (``data.calibration[RECALL_MODEL]``, which must be
-    there), existing markers included, each pose weighted by ``weights`` ((N,) summing to N, or
-    None: every pose 1). A plan's own curve is this with its order and ``data.pose_weight``."""
-    fit = data.calibration[RECALL_MODEL]
+    order) under the success model fitted for the calibrated method ``model`` (the plan's
+    ``recall_model``; ``data.calibration[model]``, which must be there), existing markers
+    included, each pose weighted by ``weights`` ((N,) summing to N, or None: every pose 1). A
+    plan's own curve is this with its order and ``data.pose_weight``."""
+    fit = data.calibration[model]
     covs, C = fit["coverages"], data.num_candidates
     return recall_curve(data.base_info, covs[:C], np.asarray(order, dtype=np.int64), fit["model"], covs[C:], weights)
 
 
-def _curve(data: PlanData, order: np.ndarray) -> np.ndarray:
-    return marker_set_curve(data, order, data.pose_weight)
+def _curve(data: PlanData, order: np.ndarray, config: PlacementConfig) -> np.ndarray:
+    return marker_set_curve(data, order, data.pose_weight, config.recall_model)
 
 
 def place_for_target(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (),
@@ -109,7 +107,7 @@ def place_for_target(data: PlanData, config: PlacementConfig, existing: Sequence
     limit = (f"within -k {config.k} tags" if most == config.k and most < C else
              f"within the {free} free tag ids" if most == free and most < C else "with the candidates")
     first = place(data, replace(config, k=most), existing, progress)
-    curve = _curve(data, first.candidates)
+    curve = _curve(data, first.candidates, config)
     j, reached = target_count(curve, R)
     best_tags = target_count(curve, 2.0)[0]  # the smallest prefix at the maximum
     info = {"target": R, "reached": reached, "tags": j, "best_recall": float(curve[1:].max()),
@@ -127,21 +125,21 @@ def predicted_recall(data: PlanData, placement: Placement, config: PlacementConf
                      target: dict | None = None) -> dict:
     """The ``predicted_recall`` object of placement.json.
 
-    With the success model fitted (``data.calibration[RECALL_MODEL]``): ``available`` true,
+    With the success model fitted (``data.calibration[config.recall_model]``): ``available`` true,
     ``model`` (its JSON), ``marker_model``, ``k`` [0..K] and ``recall`` R(0..K) (shares) of the
     plan's order, ``knee`` (int or None) with ``knee_rule``, ``upper_bound`` (``k``, ``recall``:
     the bound of any K candidates, ``plan_recall``, ``what``) and ``target``
     (:func:`place_for_target`'s dict, or None). Without it: ``available`` false and ``how``.
     """
-    fit = data.calibration.get(RECALL_MODEL)
+    fit = data.calibration.get(config.recall_model)
     if fit is None:
         return {"available": False, "how": HOW_TO_GET}
     order = np.asarray(placement.candidates, dtype=np.int64)
-    curve = _curve(data, order)
+    curve = _curve(data, order, config)
     covs, C, K = fit["coverages"], data.num_candidates, len(order)
     bound = recall_upper_bound(data.base_info, covs[:C], order, K, fit["model"], covs[C:], data.pose_weight)
     return {"available": True, "model": fit["model"].to_json(),
-            "marker_model": method_named(RECALL_MODEL, config).conf.tag_model,
+            "marker_model": method_conf(config.recall_model, config).tag_model,
             "k": list(range(K + 1)), "recall": [round(float(r), 6) for r in curve],
             "knee": knee(curve), "knee_rule": KNEE_RULE,
             "upper_bound": {"k": K, "recall": round(max(bound, float(curve[-1])), 6),

@@ -19,12 +19,14 @@ __all__ = ["place", "first_pick_gain"]
 
 def place(data: PlanData, config: PlacementConfig, existing: Sequence[Marker] = (), progress: bool = True) -> Placement:
     """Choose ``config.k`` markers among the candidates with the method ``config.method``
-    (:func:`~markerplace.plan.place.methods.method_from_config`), seeded with ``config.seed``.
+    (:func:`~markerplace.plan.place.methods.method_from_config`), seeded with ``config.seed``; a
+    nested method may stop early at ``config.target_recall``.
 
     With ``progress``, each OMP pick is logged (candidate, gain) as it is made.
     """
     check_k(config.k, data.num_candidates)
-    choice = method_from_config(config).place(data, config.k, seed=config.seed, progress=progress)
+    choice = method_from_config(config).place(data, config.k, seed=config.seed, progress=progress,
+                                              target=config.target_recall)
     order = np.asarray(choice.order, dtype=np.int64)
     used = {m.tag_id for m in existing}
     markers, tag_id = [], config.first_tag_id
