@@ -56,6 +56,15 @@ def test_plan_out_naming_a_file_is_one_line_error(tmp_path, capsys):
     _one_line_error(capsys, "--out", "is an existing file")
 
 
+def test_a_map_too_small_for_the_vlad_codebook_is_one_line(tmp_path, capsys):
+    """expected-recall's fit on a map of a few images without 64 SIFT features: one line naming
+    the fix, not k-means' ValueError."""
+    args = ["plan", "tiny", "--method", "expected-recall", "--grid-spacing", "2", "--yaws", "1", "-k", "1",
+            "--workers", "1", "--quiet", "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    _one_line_error(capsys, "VLAD codebook", "--grid-spacing")
+
+
 @pytest.mark.parametrize("command", ["render", "scene export"])
 def test_file_output_naming_a_folder_is_one_line_error(command, tmp_path, capsys):
     target = tmp_path / "tiny.glb"

@@ -16,6 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
+from markerplace.errors import UserError
 from markerplace.imaging.config import SIFT_DEFAULT, renders_alike
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
@@ -78,6 +79,11 @@ def vlad_codebook(cache_dir: Path, base_key: str, imaging, map_base: BaseImages,
     ``cache_dir/vlad_codebook.npz``; the key (with the digest of the map's features) fixes the
     map of every prediction made with it."""
     key = cache.hash_of("vlad-v2", base_key, map_base.digest, imaging, num_clusters, seed)
+    n = len(map_base.features.descriptors)
+    if n < num_clusters:
+        raise UserError(f"the marker-free map images hold {n} SIFT features, fewer than the {num_clusters} words of "
+                        "the VLAD codebook: use more map images (a finer --grid-spacing, more --yaws) or a scene "
+                        "with texture")
     codebook = cached("vlad_codebook", Path(cache_dir) / "vlad_codebook.npz", key,
                       lambda: VladCodebook.train(np.asarray(map_base.features.descriptors, np.float32),
                                                  num_clusters=num_clusters, seed=seed),
