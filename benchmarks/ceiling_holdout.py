@@ -33,7 +33,7 @@ import numpy as np
 from markerplace.plan.discretize import artifact as discretization
 from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
 from markerplace.testbed.marker_sets import NO_MARKERS
-from markerplace.testbed.poses import TestPoses
+from markerplace.testbed.pose_sampling import TestPoses
 from markerplace.testbed.prediction_store import load_prediction
 
 

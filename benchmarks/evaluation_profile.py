@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
 
     from markerplace.imaging.engine import ImagingEngine
-    from markerplace.localization.features import extract_sift
+    from markerplace.localization.sift import extract_sift
     from markerplace.localization.localizer import get_localizer
     from markerplace.localization.tags import detect_tags
     from markerplace.markers import load_markers
@@ -121,11 +121,11 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
     from markerplace.testbed.config import LocalizationConfig, TestSetConfig
-    from markerplace.testbed.images import TestbedImaging
+    from markerplace.testbed.rendered_images import TestbedImaging
     from markerplace.testbed.map_setup import (localizer_spec, map_base_key, map_images, testbed_imaging_config,
                                                vlad_codebook)
     from markerplace.testbed.maps import load_map_database, localize_features
-    from markerplace.testbed.predict import PlacementMaps
+    from markerplace.testbed.placement_localization import PlacementMaps
 
     placement = args.placement or args.plan / "placement.json"
     single_threaded_libraries()

@@ -20,7 +20,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from markerplace.plan.discretize import artifact as discretization
-from markerplace.testbed.calibration import offgrid_poses
+from markerplace.testbed.success_fit import offgrid_poses
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 
 

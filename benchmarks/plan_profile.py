@@ -221,7 +221,7 @@ def per_pose(args, spec, up, out: Path) -> None:
     from markerplace.imaging.engine import EngineSpec, ImagingEngine
     from markerplace.imaging.features import FeatureWriter, ImageFeatures
     from markerplace.imaging.visibility import marker_points
-    from markerplace.localization.features import extract_sift, lift_to_3d
+    from markerplace.localization.sift import extract_sift, lift_to_3d
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.artifact import load as load_discretization
     from markerplace.plan.score.stage import geometric_visibility

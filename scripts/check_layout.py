@@ -18,7 +18,9 @@ and ``a.b``, which count as edges too.
   (a type annotation is a dependency too; shared types live in a types module instead);
 * **package-level cycles**: at every level of the package tree, the graph between sibling
   packages and modules (:func:`package_graphs`), with every import counted;
-* **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`.
+* **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`;
+* **module names**: one file name per meaning: no two modules share a file name
+  (:func:`repeated_names`) except those of :data:`SHARED_NAMES`.
 
 Exit status 1 when any of these is found or a module is over ``--fail-lines`` (when given),
 0 otherwise. ``tests/test_layout.py`` runs the same functions with its allow-list.
@@ -178,6 +180,26 @@ def deferred_imports(root: Path = ROOT) -> list[tuple[str, int, str]]:
     return sorted(out)
 
 
+SHARED_NAMES = {
+    "__init__": "a package's docstring",
+    "config": "a package's settings (one frozen dataclass per stage or part)",
+    "stage": "a plan stage package's entry: its cached run function (plan/discretize, similarity, score, place)",
+    "types": "a package's shared hand-over types, kept apart from the modules that use them (plan, scene)",
+}
+"""File names (without ``.py``) that several modules may carry, each with its reason: the name
+means the same thing in every package that has it. Any other name is one module's."""
+
+
+def repeated_names(root: Path = ROOT) -> dict[str, list[str]]:
+    """File name -> the modules (paths relative to ``root``'s parent) that share it, for every
+    name not in :data:`SHARED_NAMES` carried by more than one module."""
+    by_name: dict[str, list[str]] = {}
+    for path in sorted(root.rglob("*.py")):
+        if path.stem not in SHARED_NAMES:
+            by_name.setdefault(path.stem, []).append(path.relative_to(root.parent).as_posix())
+    return {name: paths for name, paths in sorted(by_name.items()) if len(paths) > 1}
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan), each sorted, largest first."""
     index: dict[str, int] = {}
@@ -279,7 +301,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"imports inside functions (other than {len(HEAVY_OPTIONAL)} heavy optional modules): {len(inner)}")
     for name, line, mod in inner[:40]:
         print(f"  {name}:{line}: {mod}")
-    if full_cycles or tc_cycles or pkg_cycles or inner:
+    repeated = repeated_names(args.root)
+    print(f"file names shared by several modules (other than {', '.join(sorted(SHARED_NAMES))}): {len(repeated)}")
+    for name, paths in repeated.items():
+        print(f"  {name}.py: {', '.join(paths)}")
+    if full_cycles or tc_cycles or pkg_cycles or inner or repeated:
         status = 1
     if args.fail_lines is not None and any(n > args.fail_lines for n, _ in big):
         status = 1

@@ -94,6 +94,30 @@ def test_imports_at_module_level_except_heavy_optional_ones(layout):
     assert all(name.split(".")[0] != "markerplace" for name in layout.HEAVY_OPTIONAL)
 
 
+def test_one_file_name_per_meaning(layout):
+    """No two modules share a file name (``check.py`` three times meant three things), except the
+    documented ``SHARED_NAMES``, each the same kind of module in every package that has one."""
+    found = layout.repeated_names()
+    assert not found, "modules sharing a file name (rename one, or document the name in SHARED_NAMES): " + "; ".join(
+        f"{name}.py: {', '.join(paths)}" for name, paths in found.items())
+    assert all(reason.strip() for reason in layout.SHARED_NAMES.values())
+
+
+def test_the_checker_finds_a_repeated_module_name(tmp_path, layout):
+    pkg = tmp_path / "markerplace"
+    for sub in ("plan", "cli"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+        (pkg / sub / "config.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "plan" / "check.py").write_text("")
+    assert layout.repeated_names(pkg) == {}  # __init__ and config repeat by design
+    (pkg / "cli" / "check.py").write_text("")
+    assert layout.repeated_names(pkg) == {"check": ["markerplace/cli/check.py", "markerplace/plan/check.py"]}
+    out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)
+    assert out.returncode == 1 and "check.py: markerplace/cli/check.py, markerplace/plan/check.py" in out.stdout
+
+
 def test_no_module_over_the_limit(layout):
     sizes = layout.line_counts()
     over = {m: n for m, n in sizes.items() if n > MAX_LINES and m not in ALLOWED_OVER}

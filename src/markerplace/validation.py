@@ -14,7 +14,7 @@ special options (``--pose``, ``--start``, ``--k``, ``--level``); :func:`check_po
 :func:`check_render_sees_something` refuse a ``render`` pose outside the model or seeing nothing
 of it. Lengths are metres, angles degrees.
 
-The other up-front checks: output paths in :mod:`markerplace.output_checks`, the run-size guard
+The other up-front checks: output paths in :mod:`markerplace.output_paths`, the run-size guard
 in :mod:`markerplace.pipelines.size_guard`.
 """
 

@@ -20,7 +20,7 @@ def test_evaluate_bad_settings(args, message, tmp_path, capsys):
 def test_test_seed_defaults_to_seed_and_overrides_it():
     import argparse
 
-    from markerplace.cli.evaluate import add_evaluate_parser, evaluate_config_from_args
+    from markerplace.cli.evaluate_command import add_evaluate_parser, evaluate_config_from_args
 
     parser = argparse.ArgumentParser()
     add_evaluate_parser(parser.add_subparsers(dest="command"))

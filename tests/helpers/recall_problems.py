@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from markerplace.geometry import world_from_marker_pose
-from markerplace.plan.place.predicted import RECALL_MODEL
+from markerplace.plan.place.predicted_recall import RECALL_MODEL
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.success_model import SuccessModel
 from markerplace.plan.types import MarkerCoverage, PlanData

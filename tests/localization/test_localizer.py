@@ -14,7 +14,7 @@ from skimage import data
 
 from markerplace.geometry import Intrinsics, invert, so3_exp, world_from_cam_pose, world_from_marker_pose
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
-from markerplace.localization.features import SIFT_DEFAULT
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.localization.localizer import Localizer, LocalizerConfig
 from markerplace.localization.pnp import pose_errors
 from markerplace.localization.vlad import VladCodebook

@@ -16,9 +16,9 @@ from markerplace.pipelines.evaluate import EVALUATE_OUTPUTS
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
 from markerplace.testbed import marker_sets as placements
-from markerplace.testbed import poses as tposes
+from markerplace.testbed import pose_sampling as tposes
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed.images import TestbedImaging
+from markerplace.testbed.rendered_images import TestbedImaging
 
 
 def _box_scene(size=4.0, height=2.7):

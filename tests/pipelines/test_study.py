@@ -45,7 +45,7 @@ def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_pat
     from markerplace.cli.bounds import EVAL_K
     from markerplace.validation import parse_int_list
 
-    from markerplace.cli.evaluate import evaluate_config_from_args
+    from markerplace.cli.evaluate_command import evaluate_config_from_args
 
     for command in ("study", "evaluate"):
         args = build_parser().parse_args([command, "tiny", "--out", str(tmp_path / command)])

@@ -15,7 +15,7 @@ from markerplace.localization.localizer import Localizer
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
 from markerplace.testbed.ceiling import oracle_order
-from markerplace.testbed.calibration import placement_candidates
+from markerplace.testbed.success_fit import placement_candidates
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
 
@@ -33,7 +33,7 @@ def _db(M: int = 12, seed: int = 0) -> MapDatabase:
 
 
 def test_retrieval_leaves_out_excluded_images_and_keeps_the_order_of_the_rest():
-    from markerplace.testbed.predict import Retrieval
+    from markerplace.testbed.placement_localization import Retrieval
 
     db = _db()
     loc = Localizer(db, np.eye(3), num_candidates=5)

@@ -54,7 +54,7 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
     from markerplace.pipelines.evaluate import run_evaluation
-    from markerplace.testbed.images import TestbedImaging
+    from markerplace.testbed.rendered_images import TestbedImaging
 
     rendered = []
     real = TestbedImaging.render_iter
@@ -125,7 +125,7 @@ def test_candidate_tag_ids_share_renders(tmp_path, monkeypatch):
     at k = 2 and 3, OMP) draw the same image and share its render, so the run renders fewer
     images than with ids in placement order."""
     from markerplace.cli.main import main
-    from markerplace.testbed.images import TestbedImaging
+    from markerplace.testbed.rendered_images import TestbedImaging
 
     counts: dict[str, int] = {}
     real = TestbedImaging.render_iter

@@ -1,5 +1,5 @@
 """Long per-image stages of ``evaluate`` resume mid-way: the marker-free map and query images
-(features and in-view masks, :class:`~markerplace.testbed.images.BaseImages`) and the
+(features and in-view masks, :class:`~markerplace.testbed.rendered_images.BaseImages`) and the
 localizations of one prediction (:class:`~markerplace.testbed.prediction_store.PartialPrediction`)
 commit their work in parts, so a run stopped half-way (here by a ``KeyboardInterrupt`` raised
 from the task after N images, as Ctrl-C raises one) loses at most one part; the next run
@@ -23,8 +23,10 @@ from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.runtime.executor import InProcessExecutor, RuntimeConfig
 from markerplace.scene.spec import SceneSpec
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed import images, predict, prediction_store
-from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed import placement_localization as predict
+from markerplace.testbed import prediction_store
+from markerplace.testbed import rendered_images as images
+from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
 from markerplace.testbed.prediction_store import PartialPrediction
 
 N = 20

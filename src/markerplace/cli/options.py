@@ -4,8 +4,8 @@ discretization, scoring, placement and runtime options, and the
 
 ``--start`` X,Y is given in the user's (file) frame, metres; :func:`markerplace.pipelines.size_guard.check_first_guess`
 moves it into the scene's internal frame after the run-size guard. Lengths are metres.
-Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` and
-:mod:`markerplace.cli.study`.
+Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate_command` and
+:mod:`markerplace.cli.study_command`.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from markerplace.geometry import Intrinsics
-from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
+from markerplace.localization.sift import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
 from markerplace.settings import setting
 
 OBSERVE_VIEWS = ("pose", "location-renders", "location-features")

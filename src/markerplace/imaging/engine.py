@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.localization.features import SiftConfig, extract_sift, lift_to_3d
+from markerplace.localization.sift import SiftConfig, extract_sift, lift_to_3d
 from markerplace.markers import Marker
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import ImageFeatures

@@ -23,7 +23,7 @@ import numpy as np
 
 from markerplace.geometry import invert
 from markerplace.markers import FAMILY, Marker
-from markerplace.localization.features import to_gray
+from markerplace.localization.sift import to_gray
 
 log = logging.getLogger(__name__)
 

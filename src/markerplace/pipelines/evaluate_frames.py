@@ -28,7 +28,7 @@ import numpy as np
 
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import marker_key
-from markerplace.localization.features import SIFT_DEFAULT
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.pipelines.plan_frames import prepare_frames
 from markerplace.plan.frames.surface import FUSED_NAME
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, write_page
@@ -42,7 +42,7 @@ from markerplace.runtime.cache import config_dict
 from markerplace.testbed import metrics
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.frames.config import FramesEvalConfig
-from markerplace.testbed.frames.images import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
+from markerplace.testbed.frames.frame_features import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
 from markerplace.testbed.frames.localize import build_map, localize_queries, markers_in_view_of, train_codebook
 from markerplace.testbed.frames.report import frames_markdown, recall_rows, set_label
 from markerplace.testbed.frames.split import block_split

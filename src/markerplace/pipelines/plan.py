@@ -30,7 +30,7 @@ from markerplace.plan.discretize.exclusion import (apply_exclusion, describe_cha
 from markerplace.plan.discretize.stage import run_discretize
 from markerplace.plan.observe import run_observe
 from markerplace.plan.place.greedy import check_k
-from markerplace.plan.place.predicted import (model_methods, place_for_target, predicted_recall, score_bound,
+from markerplace.plan.place.predicted_recall import (model_methods, place_for_target, predicted_recall, score_bound,
                                               wants_success_model)
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
@@ -46,7 +46,7 @@ from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.testbed.calibration import calibrate_plan
+from markerplace.testbed.success_fit import calibrate_plan
 from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_config
 
 log = logging.getLogger(__name__)
@@ -153,9 +153,9 @@ class PlanResult:
 
 def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs: PlanInputs = PlanInputs()) -> PlanResult:
     """Plan ``config.placement.k`` tags in the scene (with ``target_recall``: as many as reach
-    it, k at most: :func:`~markerplace.plan.place.predicted.place_for_target`) and write every
+    it, k at most: :func:`~markerplace.plan.place.predicted_recall.place_for_target`) and write every
     deliverable into ``out``; placement.json and report.html carry the predicted recall against
-    k where the success model was fitted (:func:`~markerplace.plan.place.predicted.wants_success_model`).
+    k where the success model was fitted (:func:`~markerplace.plan.place.predicted_recall.wants_success_model`).
 
     Every input is read and checked before any work; the folder is then opened as this run's
     (marked, locked, only markerplace's own files rewritten: :mod:`markerplace.runtime.run_folder`).

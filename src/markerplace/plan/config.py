@@ -16,7 +16,7 @@ from markerplace.imaging.config import ImagingConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
 from markerplace.plan.place.methods import PLACEMENT_METHODS
-from markerplace.plan.place.predicted import wants_success_model
+from markerplace.plan.place.predicted_recall import wants_success_model
 from markerplace.plan.score.localizability import NoiseConfig
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.similarity.config import SimilarityConfig

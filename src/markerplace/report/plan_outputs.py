@@ -108,7 +108,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
     :class:`~markerplace.plan.discretize.exclusion.Exclusion`, user frame) goes there too.
     ``predicted`` (``predicted_recall`` and ``score_bound``,
-    :mod:`markerplace.plan.place.predicted`) goes into placement.json as it is. ``where``
+    :mod:`markerplace.plan.place.predicted_recall`) goes into placement.json as it is. ``where``
     (``--where``, :class:`~markerplace.plan.where.Where`) goes into config.json as read; with
     ``data.pose_weight`` the summary gets a ``where`` object (weighted mean scores, the poses
     that weigh) and ``where.png`` maps the mean weight per location.

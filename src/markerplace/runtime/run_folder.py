@@ -32,7 +32,7 @@ from typing import Iterable
 from markerplace.errors import UserError, write_error
 from markerplace.runtime.run_lock import RunLock, check_bookkeeping, release_readers
 from markerplace import __version__
-from markerplace.output_checks import check_output_dir
+from markerplace.output_paths import check_output_dir
 
 log = logging.getLogger(__name__)
 

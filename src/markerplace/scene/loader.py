@@ -48,7 +48,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.scene.worldframe import OFFSET_KEY
-from markerplace.input_checks import input_kind
+from markerplace.input_paths import input_kind
 from markerplace.scene import preflight, sanity
 from markerplace.scene.mesh_text import decode_text, original_names
 from markerplace.scene.transparency import material_transparency, read_gltf_json

@@ -12,7 +12,7 @@ from markerplace.settings import SEED_MAX, setting
 from markerplace.testbed.conditions import CLEAN, CONDITIONS
 from markerplace.testbed.metrics import THRESHOLDS
 from markerplace.testbed.marker_sets import NO_MARKERS, method_names
-from markerplace.testbed.poses import ALL_TEST_SETS, TEST_SETS, WHERE_SET
+from markerplace.testbed.pose_sampling import ALL_TEST_SETS, TEST_SETS, WHERE_SET
 from dataclasses import fields
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.plan.place.methods import PLACEMENT_METHODS
@@ -164,10 +164,10 @@ class DiagnosticsConfig:
             evaluated alone on the test images, the greedy best k evaluated as a placement.
         calibration: map images localized against the rest of the map without and with each
             placement's tags, and how well the score predicts that
-            (:mod:`markerplace.testbed.calibration`).
+            (:mod:`markerplace.testbed.success_fit`).
         predicted: each placement's predicted recall under the success model plans use (fitted
             on map images unless ``expected-recall`` is evaluated, which fits it anyway) against
-            its measured recall, and the calibration error (:mod:`markerplace.testbed.predicted`).
+            its measured recall, and the calibration error (:mod:`markerplace.testbed.predicted_per_placement`).
     """
 
     ceiling: bool = setting(False, flag="--ceiling", commands=("evaluate",), const=True,

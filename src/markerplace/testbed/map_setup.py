@@ -1,7 +1,7 @@
 """The marker-free side of the testbed that every evaluation of one plan shares: the map images'
 features and the VLAD codebook trained on them, cached under keys that depend only on the
 scene, the map poses, the imaging settings and the codebook's settings. ``evaluate`` and the
-calibration of ``expected-recall`` (:mod:`markerplace.testbed.calibration`) build them through
+calibration of ``expected-recall`` (:mod:`markerplace.testbed.success_fit`) build them through
 these functions, so when they share a cache folder the map is rendered and the codebook trained
 once.
 """
@@ -21,8 +21,8 @@ from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
 from markerplace.plan.observe import MapOutput
-from markerplace.testbed.images import BaseImages, TestbedImaging, base_features_key
-from markerplace.testbed.predict import ImageSet, PredictContext
+from markerplace.testbed.rendered_images import BaseImages, TestbedImaging, base_features_key
+from markerplace.testbed.placement_localization import ImageSet, PredictContext
 from markerplace.localization.vlad import VladCodebook
 
 log = logging.getLogger(__name__)
@@ -97,8 +97,8 @@ def marker_free_images(tb: TestbedImaging, map_poses: np.ndarray, test_poses: di
     ``condition_seed`` (the test seed). The map is always clean.
 
     Returns:
-        (the :class:`~markerplace.testbed.predict.PredictContext` every prediction shares,
-        image set name -> :class:`~markerplace.testbed.predict.ImageSet`, test sets in order,
+        (the :class:`~markerplace.testbed.placement_localization.PredictContext` every prediction shares,
+        image set name -> :class:`~markerplace.testbed.placement_localization.ImageSet`, test sets in order,
         conditions in order within each).
     """
     t0 = time.perf_counter()

@@ -150,7 +150,7 @@ def toy_methods(monkeypatch):
 def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, capsys):
     """Registering is all it takes: plan --method, evaluate --methods, build_placements, the size
     estimate, help texts and the report tables all see it."""
-    from markerplace.cli.evaluate import evaluate_config_from_args
+    from markerplace.cli.evaluate_command import evaluate_config_from_args
     from markerplace.cli.main import build_parser, plan_config_from_args
     from markerplace.testbed.reporting.tables import display_name, method_table
 

@@ -14,12 +14,12 @@ from markerplace.cli.main import build_parser
 from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
 from markerplace.plan.config import PlanConfig, validate
-from markerplace.plan.place.bounds import (per_pose_bound_scores, recall_upper_bound, score_upper_bound,
+from markerplace.plan.place.upper_bounds import (per_pose_bound_scores, recall_upper_bound, score_upper_bound,
                                            submodularity_sample)
 from markerplace.plan.place.config import K_ALL, PlacementConfig
 from markerplace.plan.place.expected_recall import expected_localized, expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages
-from markerplace.plan.place.predicted import (HOW_TO_GET, RECALL_MODEL, place_for_target, predicted_recall,
+from markerplace.plan.place.predicted_recall import (HOW_TO_GET, RECALL_MODEL, place_for_target, predicted_recall,
                                               score_bound, wants_success_model)
 from markerplace.plan.place.recall_curve import knee, recall_curve, target_count
 from markerplace.plan.place.stage import place

@@ -207,7 +207,7 @@ def write_evaluation_report(out: str | Path, scene_name: str, placements, predic
         placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
         predictions: ``(method, run, k, test set) -> (N, 4, 4)`` estimated ``world_from_cam``
             (all NaN where localization failed).
-        test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
+        test_poses: test set -> :class:`~markerplace.testbed.pose_sampling.TestPoses` (truth).
         config: the :class:`~markerplace.testbed.config.EvaluateConfig`.
         camera: :class:`~markerplace.geometry.Intrinsics` of the test images.
         scene: the scene (internal frame) to render the gallery; None = gallery without images.

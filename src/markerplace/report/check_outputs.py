@@ -1,5 +1,5 @@
 """What ``markerplace check`` writes (:func:`markerplace.pipelines.check.run_check` runs the
-comparison of :mod:`markerplace.plan.check` on a plan folder).
+comparison of :mod:`markerplace.plan.installed_vs_plan` on a plan folder).
 
 Outputs (default folder ``PLAN_DIR/check/``), every position in the user's frame (z up,
 metres, the file's coordinates):
@@ -7,7 +7,7 @@ metres, the file's coordinates):
 * ``check.json``: summary (mean and 10th-percentile score planned vs installed, nats), one row
   per planned spot and per extra tag (status, shift in metres and degrees, score lost, what to
   do in words and as ``move``: right/up/out metres and turns as you face the spot's wall,
-  :func:`markerplace.plan.check.correction`), and the camera locations that lost most (storey,
+  :func:`markerplace.plan.installed_vs_plan.correction`), and the camera locations that lost most (storey,
   floor height, x, y, score drop);
 * ``check.csv``: the per-tag rows as a table;
 * ``check_map.png``: per camera location the score lost (mean over yaws; dark = more lost), the

@@ -7,7 +7,7 @@ import argparse
 
 from markerplace.pipelines.check import run_check
 from markerplace.cli.options import add_adopt_arg, add_force_arg
-from markerplace.plan.check import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
+from markerplace.plan.installed_vs_plan import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
 
 
 def cmd_check(args: argparse.Namespace) -> int:

@@ -35,7 +35,7 @@ from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import EngineSpec, ImagingEngine, marker_key
 from markerplace.imaging.features import ImageFeatures
 from markerplace.imaging.visibility import marker_points, markers_in_view
-from markerplace.localization.features import extract_sift, lift_to_3d
+from markerplace.localization.sift import extract_sift, lift_to_3d
 from markerplace.localization.tags import detect_tags
 from markerplace.markers import Marker
 from markerplace.runtime.cache import hash_of

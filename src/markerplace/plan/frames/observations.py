@@ -1,6 +1,6 @@
 """Observations of a frames plan from the real images (no rendering): per chosen frame, SIFT
 with the plan's preset (``imaging.sift``), each keypoint lifted to 3D by the frame's own depth
-(:func:`~markerplace.localization.features.lift_to_3d`: keypoints without a depth reading, at a
+(:func:`~markerplace.localization.sift.lift_to_3d`: keypoints without a depth reading, at a
 depth edge or beyond ``imaging.max_depth`` are dropped), and ``candidate_unoccluded`` (N, C):
 the candidate's centre and four corners project inside the image in front of the camera and the
 frame's depth there is not nearer than the tag by more than ``imaging.occlusion_tolerance``
@@ -22,7 +22,7 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import marker_points, markers_unoccluded
-from markerplace.localization.features import extract_sift, lift_to_3d
+from markerplace.localization.sift import extract_sift, lift_to_3d
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached

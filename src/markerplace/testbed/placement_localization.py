@@ -28,7 +28,7 @@ from markerplace.imaging.features import ImageFeatures
 from markerplace.tagfamily import DRAWING_VERSION
 from markerplace.runtime import cache, run_folder
 from markerplace.testbed.conditions import QueryCondition
-from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
 from markerplace.testbed.maps import localize_task, save_map
 from markerplace.testbed.marker_sets import NO_MARKERS
 from markerplace.testbed.prediction_store import PartialPrediction, load_prediction, save_prediction

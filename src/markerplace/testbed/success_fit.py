@@ -47,17 +47,17 @@ from markerplace.runtime.atomic_io import write_json
 from markerplace.markers import FAMILY, Marker
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
-from markerplace.testbed.images import BaseImages, TestbedImaging
+from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
 from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
 from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
 from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
-from markerplace.testbed.predict import ImageSet, PredictContext, predict_placements
+from markerplace.testbed.placement_localization import ImageSet, PredictContext, predict_placements
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel, fit_success_model
-from markerplace.testbed import poses as tp
+from markerplace.testbed import pose_sampling as tp
 from markerplace.testbed.config import LocalizationConfig
 
 log = logging.getLogger(__name__)
@@ -66,7 +66,7 @@ __all__ = ["map_image_set", "map_successes", "offgrid_poses", "placement_candida
            "score_outcomes"]
 
 MAP_SET = "map"
-"""Name of the map images' :class:`~markerplace.testbed.predict.ImageSet`."""
+"""Name of the map images' :class:`~markerplace.testbed.placement_localization.ImageSet`."""
 
 
 def map_image_set(map_base: BaseImages, location_index: np.ndarray) -> ImageSet:
@@ -84,9 +84,9 @@ def map_image_set(map_base: BaseImages, location_index: np.ndarray) -> ImageSet:
 
 
 OFFGRID_SET = "calibration"
-"""Name of the off-grid calibration images' :class:`~markerplace.testbed.predict.ImageSet`."""
+"""Name of the off-grid calibration images' :class:`~markerplace.testbed.placement_localization.ImageSet`."""
 OFFGRID_STREAM = 1
-"""Random stream of the off-grid poses (:attr:`~markerplace.testbed.poses.TestPoseConfig.stream`)."""
+"""Random stream of the off-grid poses (:attr:`~markerplace.testbed.pose_sampling.TestPoseConfig.stream`)."""
 
 
 def map_successes(predictions: dict, world_from_cam: np.ndarray, threshold=MAIN_THRESHOLD,
@@ -101,7 +101,7 @@ def map_successes(predictions: dict, world_from_cam: np.ndarray, threshold=MAIN_
 
 
 def offgrid_poses(data, grid_spacing: float, num: int, seed: int):
-    """``num`` test-like calibration poses (:class:`~markerplace.testbed.poses.TestPoses`): feasible
+    """``num`` test-like calibration poses (:class:`~markerplace.testbed.pose_sampling.TestPoses`): feasible
     poses drawn uniformly, perturbed like test poses, in free space, from stream
     :data:`OFFGRID_STREAM` of ``seed`` (never the test images: those use stream 0)."""
     tcfg = tp.TestPoseConfig(num=num, mode="uniform", seed=seed, stream=OFFGRID_STREAM)

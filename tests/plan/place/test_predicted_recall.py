@@ -8,7 +8,7 @@ import pytest
 
 from helpers.recall_problems import plan_data
 from markerplace.plan.place.config import PlacementConfig
-from markerplace.plan.place.predicted import RECALL_MODEL, marker_set_curve, predicted_recall
+from markerplace.plan.place.predicted_recall import RECALL_MODEL, marker_set_curve, predicted_recall
 from markerplace.plan.place.recall_curve import recall_curve
 from markerplace.plan.place.stage import place
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from markerplace.cli.options import add_force_arg
 from markerplace.errors import UserError
-from markerplace.output_checks import check_output_file
+from markerplace.output_paths import check_output_file
 from markerplace.plan.folder import read_plan_folder
 from markerplace.report.tagged_export import export_plan_glb
 

@@ -1,11 +1,11 @@
-"""Floor, top-down grid and the Discretization of a frames plan (plan/frames/layout.py)."""
+"""Floor, top-down grid and the Discretization of a frames plan (plan/frames/top_view.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from helpers.frames import tiny_poses
-from markerplace.plan.frames.layout import floor_height, occupancy_grid
+from markerplace.plan.frames.top_view import floor_height, occupancy_grid
 from markerplace.scene import load_scene
 from markerplace.scene.raycast import RayCaster
 

@@ -1,4 +1,4 @@
-"""One frame's observation from its own images (plan/frames/observe.py): SIFT lifted by the
+"""One frame's observation from its own images (plan/frames/observations.py): SIFT lifted by the
 real depth, and which tags the depth hides."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from markerplace.geometry import Intrinsics, project
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.visibility import marker_points
 from markerplace.plan.frames.candidates import marker_poses
-from markerplace.plan.frames.observe import frame_features
+from markerplace.plan.frames.observations import frame_features
 
 INTR = Intrinsics(320, 240, 262.5, 262.5, 159.5, 119.5)
 

@@ -1,7 +1,7 @@
 """What a plan predicts: recall against the number of tags, a recall target, and valid bounds.
 
 The success model is the one ``expected-recall`` fits (:data:`RECALL_MODEL`:
-:func:`markerplace.testbed.calibration.calibrate_plan`, map images only, the method's marker
+:func:`markerplace.testbed.success_fit.calibrate_plan`, map images only, the method's marker
 model ``corners``). A plan fits it when :func:`wants_success_model` says so: the method is
 calibrated, ``--target-recall`` is given or ``--recall-curve`` asks for it; otherwise the
 predicted-recall part of ``placement.json`` says how to get it (:data:`HOW_TO_GET`).
@@ -12,7 +12,7 @@ predicted-recall part of ``placement.json`` says how to get it (:data:`HOW_TO_GE
   (``evaluate --predicted`` sets each evaluated placement against its test sets with it).
 * :func:`predicted_recall`: the curve R(0..k) of the plan's own order, its knee
   (:mod:`markerplace.plan.place.recall_curve`) and an upper bound on the predicted recall of any
-  k candidates (:func:`markerplace.plan.place.bounds.recall_upper_bound`).
+  k candidates (:func:`markerplace.plan.place.upper_bounds.recall_upper_bound`).
 * :func:`score_bound`: the plan's mean score and an upper bound on any k candidates' (every
   plan: no model needed).
 """
@@ -27,7 +27,7 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.markers import Marker, free_tag_ids
-from markerplace.plan.place.bounds import recall_upper_bound, score_upper_bound
+from markerplace.plan.place.upper_bounds import recall_upper_bound, score_upper_bound
 from markerplace.plan.place.config import PlacementConfig
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
 from markerplace.plan.place.recall_curve import KNEE_POINTS, knee, recall_curve, target_count
@@ -153,7 +153,7 @@ def score_bound(data: PlanData, placement: Placement) -> dict:
     """The ``score_bound`` object of placement.json (the plan's marker model): ``k``, the mean
     score (nats) with the existing tags only (``mean_score_existing``), with the plan
     (``mean_score_plan``) and ``mean_score_upper_bound`` of any k candidates (the score sum is
-    monotone submodular: :func:`markerplace.plan.place.bounds.score_upper_bound`)."""
+    monotone submodular: :func:`markerplace.plan.place.upper_bounds.score_upper_bound`)."""
     C = data.num_candidates
     order = np.asarray(placement.candidates, dtype=np.int64)
     existing = data.coverages[C:]

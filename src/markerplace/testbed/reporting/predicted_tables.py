@@ -1,5 +1,5 @@
 """``evaluate --predicted`` outputs: the predicted recall of each placement (the success model,
-:mod:`markerplace.testbed.predicted`) against its measured recall, and the calibration error.
+:mod:`markerplace.testbed.predicted_per_placement`) against its measured recall, and the calibration error.
 
 * ``predicted.csv``: one row per (test set, method, run, k) with :data:`PREDICTED_COLUMNS`
   (shares in [0, 1]; ``difference`` = predicted - measured, in percentage points);
@@ -39,7 +39,7 @@ PREDICTED_COLUMNS = ("scene", "test_set", "method", "run", "k", "predicted", "pr
 
 
 def predicted_rows(rows: Sequence[dict], predicted: dict, threshold: str) -> list[dict]:
-    """Join recall rows (clean, at ``threshold``) with :func:`~markerplace.testbed.predicted.predict_recalls`'s
+    """Join recall rows (clean, at ``threshold``) with :func:`~markerplace.testbed.predicted_per_placement.predict_recalls`'s
     ``predicted``; a row per placement and test set that has both, in the recall rows' order."""
     out = []
     for r in rows:

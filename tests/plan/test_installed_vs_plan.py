@@ -34,7 +34,7 @@ def test_installed_coverages_are_the_plans_own(plan):
     """The same code as --existing and the candidates: a tag at a candidate pose covers the same
     poses with the same information as that candidate in the plan."""
     from markerplace.markers import Marker
-    from markerplace.plan.check import installed_coverages
+    from markerplace.plan.installed_vs_plan import installed_coverages
     from markerplace.plan.folder import read_plan_folder
     from markerplace.pipelines.plan import prepare
     from markerplace.runtime.executor import RuntimeConfig, make_executor
@@ -123,7 +123,7 @@ def test_directions_in_the_installers_terms():
     """Hand-made installed poses against a planned one on a wall facing +y: the words say how to
     move and turn the tag as a person facing the wall sees it (their right is the wall's -x)."""
     from markerplace.geometry import world_from_marker_pose
-    from markerplace.plan.check import correction, directions
+    from markerplace.plan.installed_vs_plan import correction, directions
 
     P = world_from_marker_pose(np.array([2.0, 0.0, 1.5]), np.array([0.0, 1.0, 0.0]))
     x_right = P[:3, 0]
