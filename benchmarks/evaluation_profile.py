@@ -77,7 +77,7 @@ def copy_plan(plan: Path, dest: Path) -> dict:
 
 def test_poses(data, plan_config, mode: str, num: int, seed: int, min_clearance: float):
     """``num`` test poses drawn as ``evaluate`` draws a test set (its seed here ``seed``)."""
-    from markerplace.testbed import poses as tp
+    from markerplace.simulation import pose_sampling as tp
 
     disc = data.disc
     layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
@@ -120,12 +120,13 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.runtime.workers import single_threaded_libraries
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
-    from markerplace.testbed.config import LocalizationConfig, TestSetConfig
-    from markerplace.testbed.rendered_images import TestbedImaging
-    from markerplace.testbed.map_setup import (localizer_spec, map_base_key, map_images, testbed_imaging_config,
+    from markerplace.simulation.config import LocalizationConfig
+    from markerplace.testbed.config import TestSetConfig
+    from markerplace.simulation.rendered_images import TestbedImaging
+    from markerplace.simulation.map_setup import (localizer_spec, map_base_key, map_images, testbed_imaging_config,
                                                vlad_codebook)
-    from markerplace.testbed.maps import load_map_database, localize_features
-    from markerplace.testbed.placement_localization import PlacementMaps
+    from markerplace.simulation.maps import load_map_database, localize_features
+    from markerplace.simulation.placement_localization import PlacementMaps
 
     placement = args.placement or args.plan / "placement.json"
     single_threaded_libraries()

@@ -155,8 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.runtime.workers import single_threaded_libraries
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
-    from markerplace.testbed.map_setup import testbed_imaging_config
-    from markerplace.testbed.pose_sampling import TestPoses
+    from markerplace.simulation.map_setup import testbed_imaging_config
+    from markerplace.simulation.pose_sampling import TestPoses
 
     single_threaded_libraries()
     cv2.setNumThreads(1)

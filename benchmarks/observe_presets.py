@@ -2,7 +2,7 @@
 
 ``plan``'s observe stage (:mod:`markerplace.plan.observe`) renders every feasible pose and
 extracts SIFT with the scoring preset; ``evaluate``'s marker-free map
-(:class:`~markerplace.testbed.rendered_images.BaseImages`) renders the same poses again and extracts SIFT
+(:class:`~markerplace.simulation.rendered_images.BaseImages`) renders the same poses again and extracts SIFT
 with OpenCV's defaults and detects tags. This times, per pose, on a sample of a scene's
 feasible poses in one process: the render (RGB and depth), the scoring preset's features, the
 default preset's features plus tag detection, and a depth-only render (what the map's in-view

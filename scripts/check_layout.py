@@ -19,6 +19,9 @@ and ``a.b``, which count as edges too.
 * **package-level cycles**: at every level of the package tree, the graph between sibling
   packages and modules (:func:`package_graphs`), with every import counted;
 * **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`;
+* **the planner apart from the testbed**: nothing a plan runs (:data:`PLANNER`: ``plan/``,
+  ``pipelines/plan.py``, ``pipelines/plan_frames.py``) imports ``testbed/``, directly or through
+  what it imports (:func:`planner_testbed_imports`); what both use lives in ``simulation/``;
 * **module names**: one file name per meaning: no two modules share a file name
   (:func:`repeated_names`) except those of :data:`SHARED_NAMES`.
 
@@ -180,6 +183,40 @@ def deferred_imports(root: Path = ROOT) -> list[tuple[str, int, str]]:
     return sorted(out)
 
 
+PLANNER = ("markerplace.plan", "markerplace.pipelines.plan", "markerplace.pipelines.plan_frames")
+"""Modules (and packages, with everything in them) that a plan runs."""
+TESTBED = "markerplace.testbed"
+"""The evaluation package no planner module may reach."""
+
+
+def planner_testbed_imports(root: Path = ROOT) -> list[list[str]]:
+    """For every testbed module that a :data:`PLANNER` module reaches through imports (every
+    import counted: inside functions and under ``if TYPE_CHECKING:`` too), one import chain
+    ``[planner module, ..., testbed module]`` (the shortest found)."""
+    graph = import_graph(root, deferred=True, type_checking=True)
+
+    def within(module: str, names) -> bool:
+        return any(module == n or module.startswith(n + ".") for n in names)
+
+    starts = sorted(m for m in graph if within(m, PLANNER))
+    prev: dict[str, str | None] = {m: None for m in starts}
+    queue = list(starts)
+    while queue:
+        v = queue.pop(0)
+        for w in sorted(graph[v]):
+            if w not in prev:
+                prev[w] = v
+                queue.append(w)
+    out = []
+    for m in sorted(prev):
+        if within(m, (TESTBED,)) and (prev[m] is None or not within(prev[m], (TESTBED,))):
+            chain = [m]
+            while prev[chain[-1]] is not None:
+                chain.append(prev[chain[-1]])
+            out.append(chain[::-1])
+    return out
+
+
 SHARED_NAMES = {
     "__init__": "a package's docstring",
     "config": "a package's settings (one frozen dataclass per stage or part)",
@@ -301,11 +338,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"imports inside functions (other than {len(HEAVY_OPTIONAL)} heavy optional modules): {len(inner)}")
     for name, line, mod in inner[:40]:
         print(f"  {name}:{line}: {mod}")
+    reach = planner_testbed_imports(args.root)
+    print(f"testbed modules a plan imports: {len(reach)}")
+    for chain in reach:
+        print("  " + " -> ".join(chain))
     repeated = repeated_names(args.root)
     print(f"file names shared by several modules (other than {', '.join(sorted(SHARED_NAMES))}): {len(repeated)}")
     for name, paths in repeated.items():
         print(f"  {name}.py: {', '.join(paths)}")
-    if full_cycles or tc_cycles or pkg_cycles or inner or repeated:
+    if full_cycles or tc_cycles or pkg_cycles or inner or repeated or reach:
         status = 1
     if args.fail_lines is not None and any(n > args.fail_lines for n, _ in big):
         status = 1

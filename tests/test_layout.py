@@ -118,6 +118,36 @@ def test_the_checker_finds_a_repeated_module_name(tmp_path, layout):
     assert out.returncode == 1 and "check.py: markerplace/cli/check.py, markerplace/plan/check.py" in out.stdout
 
 
+def test_the_planner_imports_nothing_of_the_testbed(layout):
+    """``plan/``, ``pipelines/plan.py`` and ``pipelines/plan_frames.py`` (and all they import)
+    never reach ``testbed/``: what plan and evaluate share is in ``simulation/``."""
+    found = layout.planner_testbed_imports()
+    assert not found, "a plan imports the testbed: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def test_the_checker_finds_a_planner_import_of_the_testbed(tmp_path, layout):
+    pkg = tmp_path / "markerplace"
+    for sub in ("plan", "pipelines", "simulation", "testbed"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "simulation" / "fit.py").write_text("x = 1\n")
+    (pkg / "testbed" / "ceiling.py").write_text("from markerplace.simulation.fit import x\n")
+    (pkg / "pipelines" / "evaluate.py").write_text("from markerplace.testbed import ceiling\n")
+    (pkg / "pipelines" / "plan.py").write_text("from markerplace.simulation.fit import x\n")
+    assert layout.planner_testbed_imports(pkg) == []  # evaluate may use the testbed, a plan the simulation
+    (pkg / "simulation" / "fit.py").write_text("def f():\n    from markerplace.testbed.ceiling import y\n")
+    found = layout.planner_testbed_imports(pkg)  # (the testbed's __init__ runs too: reached as well)
+    assert ["markerplace.pipelines.plan", "markerplace.simulation.fit", "markerplace.testbed.ceiling"] in found
+    out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)
+    assert out.returncode == 1
+    assert "markerplace.pipelines.plan -> markerplace.simulation.fit -> markerplace.testbed.ceiling" in out.stdout
+    (pkg / "simulation" / "fit.py").write_text("x = 1\n")
+    (pkg / "plan" / "stage.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                                           "    from markerplace.testbed import ceiling\n")
+    assert ["markerplace.plan.stage", "markerplace.testbed.ceiling"] in layout.planner_testbed_imports(pkg)
+
+
 def test_no_module_over_the_limit(layout):
     sizes = layout.line_counts()
     over = {m: n for m, n in sizes.items() if n > MAX_LINES and m not in ALLOWED_OVER}

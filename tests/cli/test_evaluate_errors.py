@@ -24,7 +24,7 @@ def test_test_seed_defaults_to_seed_and_overrides_it():
 
     parser = argparse.ArgumentParser()
     add_evaluate_parser(parser.add_subparsers(dest="command"))
-    from markerplace.testbed.map_setup import localizer_spec
+    from markerplace.simulation.map_setup import localizer_spec
 
     base = ["evaluate", "tiny", "--out", "x", "--seed", "7"]
     assert evaluate_config_from_args(parser.parse_args(base)).pose_seed == 7

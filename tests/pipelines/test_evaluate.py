@@ -15,10 +15,10 @@ from markerplace.markers import Marker
 from markerplace.pipelines.evaluate import EVALUATE_OUTPUTS
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
-from markerplace.testbed import marker_sets as placements
-from markerplace.testbed import pose_sampling as tposes
+from markerplace.simulation import marker_sets as placements
+from markerplace.simulation import pose_sampling as tposes
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed.rendered_images import TestbedImaging
+from markerplace.simulation.rendered_images import TestbedImaging
 
 
 def _box_scene(size=4.0, height=2.7):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from markerplace.testbed import metrics
-from markerplace.testbed import pose_sampling as tposes
+from markerplace.simulation import metrics
+from markerplace.simulation import pose_sampling as tposes
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
 from markerplace.testbed.reporting import tables

@@ -16,8 +16,8 @@ from markerplace.markers import FAMILY, Marker
 from markerplace.plan.place.config import PlacementConfig
 from markerplace.plan.place.predicted_recall import marker_set_curve, predicted_recall
 from markerplace.plan.place.stage import place
-from markerplace.testbed.marker_sets import PlacementRun
-from markerplace.testbed.pose_sampling import sampling_probabilities
+from markerplace.simulation.marker_sets import PlacementRun
+from markerplace.simulation.pose_sampling import sampling_probabilities
 from markerplace.testbed.predicted_per_placement import drawn_weights, predict_recalls, test_set_weights
 
 SIZE = 0.4

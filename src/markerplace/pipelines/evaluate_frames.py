@@ -7,7 +7,7 @@
    (:func:`markerplace.pipelines.plan_frames.prepare_frames`; the query frames are never seen by
    any placement method);
 3. the marker sets: none and the placement methods (random and uniform with their runs), as the
-   simulation testbed makes them (:func:`markerplace.testbed.marker_sets.build_placements`);
+   simulation testbed makes them (:func:`markerplace.simulation.marker_sets.build_placements`);
 4. every image's features once (:mod:`markerplace.testbed.frames.store`): the real frames with
    each placement's tags composited in, and renders of the fused surface at the same poses;
 5. per map kind and placement, the map database and the query frames localized against it
@@ -39,7 +39,7 @@ from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import world_offset
 from markerplace.runtime.cache import config_dict
-from markerplace.testbed import metrics
+from markerplace.simulation import metrics
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.frames.config import FramesEvalConfig
 from markerplace.testbed.frames.frame_features import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
@@ -47,8 +47,8 @@ from markerplace.testbed.frames.localize import build_map, localize_queries, mar
 from markerplace.testbed.frames.report import frames_markdown, recall_rows, set_label
 from markerplace.testbed.frames.split import block_split
 from markerplace.testbed.frames.store import FeatureStore, image_key
-from markerplace.testbed.map_setup import localizer_spec
-from markerplace.testbed.marker_sets import build_placements
+from markerplace.simulation.map_setup import localizer_spec
+from markerplace.simulation.marker_sets import build_placements
 from markerplace.testbed.reporting.tables import write_recall_csv
 
 log = logging.getLogger(__name__)

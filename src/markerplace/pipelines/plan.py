@@ -46,8 +46,8 @@ from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.testbed.success_fit import calibrate_plan
-from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_config
+from markerplace.simulation.success_fit import calibrate_plan
+from markerplace.simulation.map_setup import observed_map_output, testbed_imaging_config
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
         where: the ``--where`` file (:mod:`markerplace.plan.where`, user frame): the returned
             data's ``pose_weight``, computed (and a file that holds no pose refused) right after
             discretize, before anything renders. No cached stage depends on it.
-        map_cache: a testbed cache folder (:mod:`markerplace.testbed.map_setup`): when observe
+        map_cache: a testbed cache folder (:mod:`markerplace.simulation.map_setup`): when observe
             runs, its renders also give the testbed's marker-free map features there, so the
             map is not rendered again (None: not).
         map_imaging: the testbed's imaging settings (None: the plan's camera, OpenCV SIFT).

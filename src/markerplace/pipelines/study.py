@@ -37,7 +37,7 @@ from markerplace.pipelines.plan import prepare
 from markerplace.plan.config import validate
 from markerplace.plan.place.stage import place
 from markerplace.report.figures import recall_vs_k
-from markerplace.testbed.metrics import hit_mask, main_threshold, threshold_label
+from markerplace.simulation.metrics import hit_mask, main_threshold, threshold_label
 from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference
 
 log = logging.getLogger(__name__)

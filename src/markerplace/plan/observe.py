@@ -55,7 +55,7 @@ class MapOutput:
     Attributes:
         folder: the map's feature folder (the testbed's ``map_base/features``).
         key: the cache key the testbed gives those features
-            (:func:`markerplace.testbed.rendered_images.base_features_key`); the folder is marked done
+            (:func:`markerplace.simulation.rendered_images.base_features_key`); the folder is marked done
             with it.
         config: the testbed's imaging settings: the same camera and depth settings as
             observe's, its own SIFT preset (refused otherwise: the render would differ).

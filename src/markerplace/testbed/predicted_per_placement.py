@@ -1,11 +1,11 @@
 """What the success model predicts for each evaluated placement (``evaluate --predicted``).
 
 The model is the one plans use (:data:`markerplace.plan.place.predicted_recall.RECALL_MODEL`, fitted on
-map images by :func:`markerplace.testbed.success_fit.calibrate_plan`; test images never touch
+map images by :func:`markerplace.simulation.success_fit.calibrate_plan`; test images never touch
 it), and so is the prediction: :func:`markerplace.plan.place.predicted_recall.marker_set_curve`, the
 weighted mean over the N feasible poses of P(success | score with the placement's tags). What
 changes between test sets is only the pose weights, those the test set's poses are drawn with
-(:func:`markerplace.testbed.pose_sampling.sampling_probabilities`):
+(:func:`markerplace.simulation.pose_sampling.sampling_probabilities`):
 
 * ``uniform``: every pose 1 (a plan's own ``predicted_recall`` curve without ``--where``);
 * ``weighted``: N times the paper's probabilities, towards low scores;
@@ -18,7 +18,7 @@ it (their ``source_index``): the same prediction without the luck of the draw (a
 the free-space check redrew a pose).
 
 A placement is predicted when its markers are candidates at the planned size
-(:func:`markerplace.testbed.success_fit.placement_candidates`; not with ``--tag-scale``,
+(:func:`markerplace.simulation.success_fit.placement_candidates`; not with ``--tag-scale``,
 ``--shift`` or a ``--placements`` file off the candidates); ``none`` is the empty set (k = 0).
 The ceiling's placements (picked on the test images) and its single-tag runs are left out.
 """
@@ -30,9 +30,9 @@ import logging
 import numpy as np
 
 from markerplace.plan.place.predicted_recall import marker_set_curve
-from markerplace.testbed.success_fit import placement_candidates
-from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES
-from markerplace.testbed.pose_sampling import sampling_probabilities
+from markerplace.simulation.success_fit import placement_candidates
+from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES
+from markerplace.simulation.pose_sampling import sampling_probabilities
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +63,8 @@ def predict_recalls(data, placements, test_poses: dict, tag_size: float) -> dict
 
     Args:
         data: the prepared plan with the success model fitted (``data.calibration[RECALL_MODEL]``).
-        placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
-        test_poses: test set -> :class:`~markerplace.testbed.pose_sampling.TestPoses`.
+        placements: the evaluated :class:`~markerplace.simulation.marker_sets.PlacementRun` list.
+        test_poses: test set -> :class:`~markerplace.simulation.pose_sampling.TestPoses`.
         tag_size: the planned tag size (metres): a marker of another size is no candidate.
 
     Returns:

@@ -27,7 +27,7 @@ from markerplace.plan.place.methods import (
 )
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.greedy import apply_coverages, omp_greedy
-from markerplace.testbed import marker_sets as placements
+from markerplace.simulation import marker_sets as placements
 from markerplace.testbed import config as tbconfig
 from helpers.recall_problems import problem
 

@@ -41,7 +41,7 @@ class PlacementConfig:
             only, never test images): ``map`` (the map images, each localized against the map
             without its own location) or ``offgrid`` (renders at test-like poses, map poses
             perturbed within a grid cell and +-22.5 deg of yaw, localized against the whole
-            map; :mod:`markerplace.testbed.success_fit`).
+            map; :mod:`markerplace.simulation.success_fit`).
         target_recall: place tags until the predicted recall (share of feasible camera poses
             predicted to localize under the success model fitted on the map images,
             :mod:`markerplace.plan.place.recall_curve`) reaches this share, in (0, 1]; ``k`` is
@@ -49,7 +49,7 @@ class PlacementConfig:
             nested method (``omp``, ``expected-recall``). None: place ``k`` tags.
         recall_curve: fit the success model for any method, so that ``report.html`` and
             ``placement.json`` show the predicted recall against k (calibration renders and
-            localizes the map images: :func:`markerplace.testbed.success_fit.calibrate_plan`).
+            localizes the map images: :func:`markerplace.simulation.success_fit.calibrate_plan`).
             Always on with ``expected-recall`` or ``target_recall``.
     """
 

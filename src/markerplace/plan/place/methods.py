@@ -80,7 +80,7 @@ class PlacementMethod:
         nested: the first k' picks of a k-marker choice are the k'-marker choice, so
             ``evaluate`` places it once with the largest k.
         calibrated: it needs ``PlanData.calibration[name]``, filled before placing by
-            :func:`markerplace.testbed.success_fit.calibrate_plan` (localizations of map images).
+            :func:`markerplace.simulation.success_fit.calibrate_plan` (localizations of map images).
         default_conf: the method's own settings (a frozen ``Config``).
 
     Attributes:
@@ -266,7 +266,7 @@ class ExpectedRecall(PlacementMethod):
     localize, ``sum_p P(success | s_p)`` (:func:`~markerplace.plan.place.expected_recall.expected_recall_greedy`),
     with ``P`` a logistic :class:`~markerplace.plan.score.success_model.SuccessModel` of the score fitted
     on the scene's own map images, each localized against the rest of the map without and with
-    seeded random tag sets (:func:`markerplace.testbed.success_fit.calibrate_plan`: map images
+    seeded random tag sets (:func:`markerplace.simulation.success_fit.calibrate_plan`: map images
     only, never test images). Plain greedy (the objective is not submodular); deterministic."""
 
     name = "expected-recall"
@@ -310,7 +310,7 @@ class ExpectedRecall(PlacementMethod):
         fit = data.calibration.get(self.name)
         if fit is None:
             raise UserError("--method expected-recall needs the calibration stage: run it through `markerplace plan` or "
-                            "`markerplace evaluate` (markerplace.testbed.success_fit.calibrate_plan)")
+                            "`markerplace evaluate` (markerplace.simulation.success_fit.calibrate_plan)")
         C = data.num_candidates
 
         def report(i: int, k: int, candidate: int, gain: float) -> None:

@@ -1,7 +1,7 @@
 """What a plan predicts: recall against the number of tags, a recall target, and valid bounds.
 
 The success model is the one ``expected-recall`` fits (:data:`RECALL_MODEL`:
-:func:`markerplace.testbed.success_fit.calibrate_plan`, map images only, the method's marker
+:func:`markerplace.simulation.success_fit.calibrate_plan`, map images only, the method's marker
 model ``corners``). A plan fits it when :func:`wants_success_model` says so: the method is
 calibrated, ``--target-recall`` is given or ``--recall-curve`` asks for it; otherwise the
 predicted-recall part of ``placement.json`` says how to get it (:data:`HOW_TO_GET`).

@@ -17,7 +17,7 @@ composite's random noise is seeded per (seed, frame, markers), so a rerun gives 
 
 A worker's state (:class:`FrameWorker`) holds the frame set, the intrinsics and, made on first
 use, a renderer of the fused surface; its ``cache`` and ``K`` also serve
-:func:`markerplace.testbed.maps.localize_task`.
+:func:`markerplace.simulation.maps.localize_task`.
 
 Frames: world z up, metres; ``world_from_cam`` in OpenCV camera axes.
 """

@@ -25,8 +25,8 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
-from markerplace.testbed.conditions import CLEAN
-from markerplace.testbed.marker_sets import NO_MARKERS
+from markerplace.simulation.conditions import CLEAN
+from markerplace.simulation.marker_sets import NO_MARKERS
 from markerplace.testbed.reporting.tables import md_name, md_text, ordered_methods
 
 log = logging.getLogger(__name__)

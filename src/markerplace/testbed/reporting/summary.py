@@ -2,7 +2,7 @@
 differences, fixed/broken counts, recall vs k, per-query errors.
 
 Predictions (the estimated pose of every test image, per placement and test set) are stored
-apart from these metrics (:mod:`markerplace.testbed.prediction_store`), so the tables can be
+apart from these metrics (:mod:`markerplace.simulation.prediction_store`), so the tables can be
 recomputed with other thresholds without localizing again.
 """
 
@@ -16,8 +16,8 @@ from markerplace.runtime.atomic_io import atomic_path
 from markerplace.report.figures import recall_vs_k
 from markerplace.runtime.atomic_io import write_json, write_npz
 from markerplace.runtime.cache import config_dict
-from markerplace.testbed import metrics
-from markerplace.testbed.conditions import set_name, split_set
+from markerplace.simulation import metrics
+from markerplace.simulation.conditions import set_name, split_set
 from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
 from markerplace.testbed.reporting.predicted_tables import (error_summary, log_predicted, predicted_markdown, predicted_rows,
@@ -37,12 +37,12 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     Args:
         out: the run folder.
         scene_name: scene label of the tables.
-        placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
+        placements: the evaluated :class:`~markerplace.simulation.marker_sets.PlacementRun` list.
         predictions: ``(method, run, k, image set) -> (N, 4, 4)`` estimated ``world_from_cam``
             per test image (all NaN where localization failed); an image set is a test set
-            under a query condition (:func:`~markerplace.testbed.conditions.set_name`): rows,
+            under a query condition (:func:`~markerplace.simulation.conditions.set_name`): rows,
             tables and ``query_errors.npz``'s ``<image set>_*`` arrays are per image set.
-        test_poses: test set -> :class:`~markerplace.testbed.pose_sampling.TestPoses` (truth).
+        test_poses: test set -> :class:`~markerplace.simulation.pose_sampling.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
         where: the ``--where`` file as read (GeoJSON), recorded in config.json; None: none.
         config, plan_config: the evaluate and plan settings.

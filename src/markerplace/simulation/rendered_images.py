@@ -25,7 +25,7 @@ from markerplace.runtime.atomic_io import write_npy
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache, run_folder
-from markerplace.testbed.conditions import QueryCondition, render_query
+from markerplace.simulation.conditions import QueryCondition, render_query
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,7 @@ __all__ = ["TestbedImaging", "BaseImages", "base_features_key"]
 def _render_task(engine: ImagingEngine, item) -> ImageFeatures:
     """(world_from_cam, markers, map_only[, image condition]) -> features of the render with
     those markers, degraded by the query condition when one is given
-    (:func:`~markerplace.testbed.conditions.render_query`); a marker-free render also carries
+    (:func:`~markerplace.simulation.conditions.render_query`); a marker-free render also carries
     ``extras['in_view']``, the (U,) union-marker in-view mask (of the clean depth)."""
     world_from_cam, markers, map_only = item[:3]
     res = render_query(engine, world_from_cam, markers, item[3] if len(item) > 3 else None)

@@ -1,4 +1,4 @@
-"""Query conditions (markerplace.testbed.conditions): deterministic per seed, a measured change in
+"""Query conditions (markerplace.simulation.conditions): deterministic per seed, a measured change in
 the documented range, the map's light untouched, the CLI's check, and an evaluation that
 reports a row per condition while the clean results and caches stay those of a clean run."""
 
@@ -10,8 +10,8 @@ import pytest
 
 from markerplace.imaging import degrade
 from markerplace.render.renderer import Lighting, RenderResult
-from markerplace.testbed import conditions as cond
-from markerplace.testbed.conditions import CONDITIONS, QueryCondition, degrade_render, set_name, split_set
+from markerplace.simulation import conditions as cond
+from markerplace.simulation.conditions import CONDITIONS, QueryCondition, degrade_render, set_name, split_set
 
 POSE = np.eye(4)
 K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])  # for 320 x 240 images

@@ -27,12 +27,12 @@ import numpy as np
 from markerplace.imaging.features import ImageFeatures
 from markerplace.tagfamily import DRAWING_VERSION
 from markerplace.runtime import cache, run_folder
-from markerplace.testbed.conditions import QueryCondition
-from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
-from markerplace.testbed.maps import localize_task, save_map
-from markerplace.testbed.marker_sets import NO_MARKERS
-from markerplace.testbed.prediction_store import PartialPrediction, load_prediction, save_prediction
-from markerplace.testbed.render_store import RenderStore
+from markerplace.simulation.conditions import QueryCondition
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
+from markerplace.simulation.maps import localize_task, save_map
+from markerplace.simulation.marker_sets import NO_MARKERS
+from markerplace.simulation.prediction_store import PartialPrediction, load_prediction, save_prediction
+from markerplace.simulation.render_store import RenderStore
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.localization.vlad import nearest
 from markerplace.registry import configure
@@ -110,7 +110,7 @@ class PlacementMap:
     """One placement's map database on disk.
 
     Attributes:
-        folder: the database folder (:func:`~markerplace.testbed.maps.save_map`).
+        folder: the database folder (:func:`~markerplace.simulation.maps.save_map`).
         changed: indices of the map images re-rendered with the placement's markers.
         features: the map's features (marker-free ones where unchanged).
         vlad: (M, D) the map images' VLAD vectors, or None when no retrieval replay is kept.
@@ -300,7 +300,7 @@ class PredictContext:
         tb: the testbed's imaging (and executor).
         map_base: marker-free map features.
         codebook: the VLAD codebook; ``codebook_key`` its cache key (it fixes the map).
-        localizer: (localizer name, settings) (:func:`~markerplace.testbed.map_setup.localizer_spec`).
+        localizer: (localizer name, settings) (:func:`~markerplace.simulation.map_setup.localizer_spec`).
         imaging: the testbed's imaging config (part of the cache keys).
         cache_dir: ``predictions/`` and the temporary map folders go here.
         timings: ``map_with_markers`` and ``localize`` seconds are added.
@@ -326,7 +326,7 @@ def predict_placements(ctx: PredictContext, placements, sets: dict) -> dict:
 
     Args:
         ctx: what the predictions share (:class:`PredictContext`).
-        placements: :class:`~markerplace.testbed.marker_sets.PlacementRun` list; the marker-free
+        placements: :class:`~markerplace.simulation.marker_sets.PlacementRun` list; the marker-free
             one (``none``) first, so that the others can reuse its results. A placement with
             ``test_sets`` is localized on those sets only (``map`` is always localized).
         sets: name -> :class:`ImageSet`.

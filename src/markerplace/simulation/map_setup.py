@@ -1,7 +1,7 @@
 """The marker-free side of the testbed that every evaluation of one plan shares: the map images'
 features and the VLAD codebook trained on them, cached under keys that depend only on the
 scene, the map poses, the imaging settings and the codebook's settings. ``evaluate`` and the
-calibration of ``expected-recall`` (:mod:`markerplace.testbed.success_fit`) build them through
+calibration of ``expected-recall`` (:mod:`markerplace.simulation.success_fit`) build them through
 these functions, so when they share a cache folder the map is rendered and the codebook trained
 once.
 """
@@ -19,10 +19,10 @@ import numpy as np
 from markerplace.imaging.config import SIFT_DEFAULT, renders_alike
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
-from markerplace.testbed.conditions import CLEAN, QueryCondition, set_name
+from markerplace.simulation.conditions import CLEAN, QueryCondition, set_name
 from markerplace.plan.observe import MapOutput
-from markerplace.testbed.rendered_images import BaseImages, TestbedImaging, base_features_key
-from markerplace.testbed.placement_localization import ImageSet, PredictContext
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging, base_features_key
+from markerplace.simulation.placement_localization import ImageSet, PredictContext
 from markerplace.localization.vlad import VladCodebook
 
 log = logging.getLogger(__name__)
@@ -39,7 +39,7 @@ def testbed_imaging_config(plan_config, imaging_config=None):
 
 def localizer_spec(localization, seed: int) -> tuple:
     """(registered localizer name, its settings) from a
-    :class:`~markerplace.testbed.config.LocalizationConfig` and the RANSAC seed (hashable: part
+    :class:`~markerplace.simulation.config.LocalizationConfig` and the RANSAC seed (hashable: part
     of cache keys)."""
     return localization.localizer, (("use_tags", localization.use_tags), ("tag_corners", localization.tag_corners),
                                     ("seed", int(seed)))
@@ -91,14 +91,14 @@ def marker_free_images(tb: TestbedImaging, map_poses: np.ndarray, test_poses: di
     features of every test set under every query condition (each cached in ``cache_dir``).
 
     ``reuse``: predictions reuse the marker-free result where a placement cannot change it.
-    ``conditions``: query conditions (:mod:`markerplace.testbed.conditions`); each (test set,
-    condition) is an image set named :func:`~markerplace.testbed.conditions.set_name` (the
+    ``conditions``: query conditions (:mod:`markerplace.simulation.conditions`); each (test set,
+    condition) is an image set named :func:`~markerplace.simulation.conditions.set_name` (the
     clean one: the test set's name, key and folder as before conditions existed), seeded by
     ``condition_seed`` (the test seed). The map is always clean.
 
     Returns:
-        (the :class:`~markerplace.testbed.placement_localization.PredictContext` every prediction shares,
-        image set name -> :class:`~markerplace.testbed.placement_localization.ImageSet`, test sets in order,
+        (the :class:`~markerplace.simulation.placement_localization.PredictContext` every prediction shares,
+        image set name -> :class:`~markerplace.simulation.placement_localization.ImageSet`, test sets in order,
         conditions in order within each).
     """
     t0 = time.perf_counter()

@@ -47,18 +47,18 @@ from markerplace.runtime.atomic_io import write_json
 from markerplace.markers import FAMILY, Marker
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
-from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
-from markerplace.testbed.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
-from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from markerplace.testbed.marker_sets import NO_MARKERS, PlacementRun, candidate_of
-from markerplace.testbed.placement_localization import ImageSet, PredictContext, predict_placements
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
+from markerplace.simulation.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.simulation.marker_sets import NO_MARKERS, PlacementRun, candidate_of
+from markerplace.simulation.placement_localization import ImageSet, PredictContext, predict_placements
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel, fit_success_model
-from markerplace.testbed import pose_sampling as tp
-from markerplace.testbed.config import LocalizationConfig
+from markerplace.simulation import pose_sampling as tp
+from markerplace.simulation.config import LocalizationConfig
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ __all__ = ["map_image_set", "map_successes", "offgrid_poses", "placement_candida
            "score_outcomes"]
 
 MAP_SET = "map"
-"""Name of the map images' :class:`~markerplace.testbed.placement_localization.ImageSet`."""
+"""Name of the map images' :class:`~markerplace.simulation.placement_localization.ImageSet`."""
 
 
 def map_image_set(map_base: BaseImages, location_index: np.ndarray) -> ImageSet:
@@ -84,9 +84,9 @@ def map_image_set(map_base: BaseImages, location_index: np.ndarray) -> ImageSet:
 
 
 OFFGRID_SET = "calibration"
-"""Name of the off-grid calibration images' :class:`~markerplace.testbed.placement_localization.ImageSet`."""
+"""Name of the off-grid calibration images' :class:`~markerplace.simulation.placement_localization.ImageSet`."""
 OFFGRID_STREAM = 1
-"""Random stream of the off-grid poses (:attr:`~markerplace.testbed.pose_sampling.TestPoseConfig.stream`)."""
+"""Random stream of the off-grid poses (:attr:`~markerplace.simulation.pose_sampling.TestPoseConfig.stream`)."""
 
 
 def map_successes(predictions: dict, world_from_cam: np.ndarray, threshold=MAIN_THRESHOLD,
@@ -101,7 +101,7 @@ def map_successes(predictions: dict, world_from_cam: np.ndarray, threshold=MAIN_
 
 
 def offgrid_poses(data, grid_spacing: float, num: int, seed: int):
-    """``num`` test-like calibration poses (:class:`~markerplace.testbed.pose_sampling.TestPoses`): feasible
+    """``num`` test-like calibration poses (:class:`~markerplace.simulation.pose_sampling.TestPoses`): feasible
     poses drawn uniformly, perturbed like test poses, in free space, from stream
     :data:`OFFGRID_STREAM` of ``seed`` (never the test images: those use stream 0)."""
     tcfg = tp.TestPoseConfig(num=num, mode="uniform", seed=seed, stream=OFFGRID_STREAM)
@@ -165,7 +165,7 @@ def calibrate_plan(scene_spec, data, plan_config, run_dir: str | Path, executor,
         cache_dir: folder of the marker-free map features, the VLAD codebook and the
             predictions (default ``run_dir/calibration``); ``evaluate`` passes its own cache, so
             the map is rendered and the codebook trained once for both
-            (:mod:`markerplace.testbed.map_setup`).
+            (:mod:`markerplace.simulation.map_setup`).
         imaging_config: the testbed's imaging (default: the plan's camera, OpenCV SIFT).
     """
     names = [plan_config.placement.method] if methods is None else list(methods)
@@ -248,7 +248,7 @@ def score_outcomes(data, plan_config, placements, success: dict, models=("paper"
     Args:
         data: the prepared plan.
         plan_config: the plan's settings.
-        placements: evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
+        placements: evaluated :class:`~markerplace.simulation.marker_sets.PlacementRun` list.
         success: (method, run, k) -> (N,) map-image successes (:func:`map_successes`).
         models: marker model names.
 

@@ -1,6 +1,6 @@
 """Long per-image stages of ``evaluate`` resume mid-way: the marker-free map and query images
-(features and in-view masks, :class:`~markerplace.testbed.rendered_images.BaseImages`) and the
-localizations of one prediction (:class:`~markerplace.testbed.prediction_store.PartialPrediction`)
+(features and in-view masks, :class:`~markerplace.simulation.rendered_images.BaseImages`) and the
+localizations of one prediction (:class:`~markerplace.simulation.prediction_store.PartialPrediction`)
 commit their work in parts, so a run stopped half-way (here by a ``KeyboardInterrupt`` raised
 from the task after N images, as Ctrl-C raises one) loses at most one part; the next run
 computes only what no part holds and gives what an uninterrupted run gives."""
@@ -23,11 +23,11 @@ from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.runtime.executor import InProcessExecutor, RuntimeConfig
 from markerplace.scene.spec import SceneSpec
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed import placement_localization as predict
-from markerplace.testbed import prediction_store
-from markerplace.testbed import rendered_images as images
-from markerplace.testbed.rendered_images import BaseImages, TestbedImaging
-from markerplace.testbed.prediction_store import PartialPrediction
+from markerplace.simulation import placement_localization as predict
+from markerplace.simulation import prediction_store
+from markerplace.simulation import rendered_images as images
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
+from markerplace.simulation.prediction_store import PartialPrediction
 
 N = 20
 PART = 4

@@ -8,7 +8,7 @@ import numpy as np
 
 from markerplace.imaging.features import ImageFeatures
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed.render_store import RenderStore
+from markerplace.simulation.render_store import RenderStore
 
 
 def _features(seed: int, n: int = 5, tags: int = 1) -> ImageFeatures:
@@ -54,7 +54,7 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
     from markerplace.pipelines.evaluate import run_evaluation
-    from markerplace.testbed.rendered_images import TestbedImaging
+    from markerplace.simulation.rendered_images import TestbedImaging
 
     rendered = []
     real = TestbedImaging.render_iter
@@ -94,7 +94,7 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
 
 def test_candidate_tag_ids_are_fixed_by_spot():
     from markerplace.markers import Marker
-    from markerplace.testbed.marker_sets import PlacementRun, shift_markers, with_candidate_ids
+    from markerplace.simulation.marker_sets import PlacementRun, shift_markers, with_candidate_ids
 
     rng = np.random.default_rng(0)
     cands = np.tile(np.eye(4), (6, 1, 1))
@@ -125,7 +125,7 @@ def test_candidate_tag_ids_share_renders(tmp_path, monkeypatch):
     at k = 2 and 3, OMP) draw the same image and share its render, so the run renders fewer
     images than with ids in placement order."""
     from markerplace.cli.main import main
-    from markerplace.testbed.rendered_images import TestbedImaging
+    from markerplace.simulation.rendered_images import TestbedImaging
 
     counts: dict[str, int] = {}
     real = TestbedImaging.render_iter
