@@ -109,8 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
 
     from markerplace.imaging.engine import ImagingEngine
-    from markerplace.localization.sift import extract_sift
     from markerplace.localization.localizer import get_localizer
+    from markerplace.localization.sift import extract_sift
     from markerplace.localization.tags import detect_tags
     from markerplace.markers import load_markers
     from markerplace.pipelines.plan import prepare
@@ -121,12 +121,11 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
     from markerplace.simulation.config import LocalizationConfig
-    from markerplace.testbed.config import TestSetConfig
-    from markerplace.simulation.rendered_images import TestbedImaging
-    from markerplace.simulation.map_setup import (localizer_spec, map_base_key, map_images, testbed_imaging_config,
-                                               vlad_codebook)
+    from markerplace.simulation.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
     from markerplace.simulation.maps import load_map_database, localize_features
     from markerplace.simulation.placement_localization import PlacementMaps
+    from markerplace.simulation.rendered_images import TestbedImaging
+    from markerplace.testbed.config import TestSetConfig
 
     placement = args.placement or args.plan / "placement.json"
     single_threaded_libraries()

@@ -53,7 +53,6 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-
 from run_estimate import house_scan, markerplace_exe  # benchmarks/ is on sys.path when run as a script
 from scan_plan import emit
 

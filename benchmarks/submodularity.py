@@ -30,10 +30,10 @@ import numpy as np
 
 from markerplace.pipelines.plan import prepare
 from markerplace.plan.config import PlanConfig
-from markerplace.plan.place.upper_bounds import recall_upper_bound, submodularity_sample
 from markerplace.plan.place.expected_recall import expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.place.recall_curve import recall_curve
+from markerplace.plan.place.upper_bounds import recall_upper_bound, submodularity_sample
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel

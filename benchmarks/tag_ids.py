@@ -37,11 +37,11 @@ import json
 import shutil
 import subprocess
 import sys
-
-import numpy as np
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))

@@ -99,11 +99,11 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     no method can place a tag nobody sees."""
     from dataclasses import replace
 
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.pipelines.plan import prepare
-    from markerplace.plan.config import PlanConfig
 
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
                         runtime=RuntimeConfig(workers=1))

@@ -65,7 +65,6 @@ def test_observed_points_lie_on_the_true_surface(prepared, tiny):
 def test_unoccluded_agrees_with_a_render_of_the_same_tags(prepared, tiny):
     fs, run, data = prepared
     from markerplace.imaging.features import FeatureSet
-
     from markerplace.plan.discretize.artifact import load
 
     obs = FeatureSet.load(run / "observations").extras["candidate_unoccluded"]

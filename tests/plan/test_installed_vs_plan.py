@@ -10,6 +10,7 @@ import pytest
 from helpers import negative_zeros
 from markerplace.cli.main import main
 
+
 @pytest.fixture(scope="module")
 def plan(run_plan):
     return run_plan(4, folder="check")
@@ -34,9 +35,9 @@ def test_installed_coverages_are_the_plans_own(plan):
     """The same code as --existing and the candidates: a tag at a candidate pose covers the same
     poses with the same information as that candidate in the plan."""
     from markerplace.markers import Marker
-    from markerplace.plan.installed_vs_plan import installed_coverages
-    from markerplace.plan.folder import read_plan_folder
     from markerplace.pipelines.plan import prepare
+    from markerplace.plan.folder import read_plan_folder
+    from markerplace.plan.installed_vs_plan import installed_coverages
     from markerplace.runtime.executor import RuntimeConfig, make_executor
 
     folder = read_plan_folder(plan)

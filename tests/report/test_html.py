@@ -15,11 +15,11 @@ import pytest
 from helpers import FAST_2_YAWS as FAST
 from markerplace.cli.main import main
 from markerplace.report.captions import describe_tag, facing_label, wall_side
-from markerplace.testbed.reporting.page import gallery_selection
 from markerplace.report.html import markdown_to_html
 from markerplace.report.installer import standing_distance
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene
+from markerplace.testbed.reporting.page import gallery_selection
 
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 

@@ -7,8 +7,8 @@ from dataclasses import replace
 import numpy as np
 
 from markerplace.imaging.features import ImageFeatures
-from markerplace.testbed import config as tbconfig
 from markerplace.simulation.render_store import RenderStore
+from markerplace.testbed import config as tbconfig
 
 
 def _features(seed: int, n: int = 5, tags: int = 1) -> ImageFeatures:
@@ -49,11 +49,11 @@ def test_second_run_in_a_folder_renders_nothing_again(tmp_path, monkeypatch):
     """With the predictions deleted, a second run in the same folder takes every render with
     markers from the store (none is made) and gives bit-identical per-image errors; a run that
     adds placements renders only views no earlier run rendered."""
-    from markerplace.plan.discretize.stage import DiscretizeConfig
+    from markerplace.pipelines.evaluate import run_evaluation
     from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.pipelines.evaluate import run_evaluation
     from markerplace.simulation.rendered_images import TestbedImaging
 
     rendered = []

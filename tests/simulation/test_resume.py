@@ -22,12 +22,12 @@ from markerplace.plan.config import PlanConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.runtime.executor import InProcessExecutor, RuntimeConfig
 from markerplace.scene.spec import SceneSpec
-from markerplace.testbed import config as tbconfig
 from markerplace.simulation import placement_localization as predict
 from markerplace.simulation import prediction_store
 from markerplace.simulation import rendered_images as images
-from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
 from markerplace.simulation.prediction_store import PartialPrediction
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
+from markerplace.testbed import config as tbconfig
 
 N = 20
 PART = 4

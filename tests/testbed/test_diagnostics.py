@@ -14,8 +14,8 @@ from markerplace.localization.database import MapDatabase
 from markerplace.localization.localizer import Localizer
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
-from markerplace.testbed.ceiling import oracle_order
 from markerplace.simulation.success_fit import placement_candidates
+from markerplace.testbed.ceiling import oracle_order
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from markerplace.pipelines.check import run_check
 from markerplace.cli.options import add_adopt_arg, add_force_arg
+from markerplace.pipelines.check import run_check
 from markerplace.plan.installed_vs_plan import MATCH_RADIUS_M, TOLERANCE_DEG, TOLERANCE_M
 
 

@@ -7,21 +7,19 @@ from __future__ import annotations
 
 import argparse
 import logging
+from dataclasses import replace
 
 from markerplace.cli.frames_eval import add_frames_eval_args, cmd_evaluate_frames
-from markerplace.cli.options import plan_config_for_budgets
+from markerplace.cli.options import add_plan_args, add_scene_args, plan_config_for_budgets
 from markerplace.errors import UserError
 from markerplace.pipelines.evaluate import RunInputs, evaluate
 from markerplace.pipelines.from_plan import start_from_plan
 from markerplace.plan.config import PlanConfig
+from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.plan.where import load_where
 from markerplace.scene.spec import SceneSpec
-from markerplace.testbed.config import validate_evaluate_config
-from dataclasses import replace
-from markerplace.cli.options import add_plan_args, add_scene_args
-from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.settings import add_setting_args, apply, values_from_args
-from markerplace.testbed.config import EvaluateConfig
+from markerplace.testbed.config import EvaluateConfig, validate_evaluate_config
 
 log = logging.getLogger("markerplace.cli.main")
 

@@ -19,10 +19,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from markerplace.markers import Marker
 from markerplace.localization.sift import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
 from markerplace.localization.tags import detect_tags
 from markerplace.localization.vlad import VladCodebook
+from markerplace.markers import Marker
 
 log = logging.getLogger(__name__)
 

@@ -32,12 +32,12 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from markerplace.registry import Registry, configure
 from markerplace.localization.database import MapDatabase
-from markerplace.localization.sift import SIFT_DEFAULT, SiftConfig, extract_sift
 from markerplace.localization.pnp import PnPConfig, estimate_pose
+from markerplace.localization.sift import SIFT_DEFAULT, SiftConfig, extract_sift
 from markerplace.localization.tags import TagDetection, detect_tags, pose_from_tag
 from markerplace.localization.vlad import nearest_by_similarity
+from markerplace.registry import Registry, configure
 
 log = logging.getLogger(__name__)
 

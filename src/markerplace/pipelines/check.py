@@ -9,7 +9,6 @@ import logging
 import os
 from pathlib import Path
 
-
 from markerplace.errors import UserError
 from markerplace.markers import check_markers_on_walls, load_markers
 from markerplace.pipelines.plan import prepare

@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.imaging.engine import marker_key
 from markerplace.errors import UserError
+from markerplace.imaging.engine import marker_key
 from markerplace.markers import load_markers
 from markerplace.pipelines.from_plan import adopt_plan_stages, plan_placement
 from markerplace.pipelines.plan import prepare
@@ -48,16 +48,16 @@ from markerplace.runtime.claims import refuse_foreign
 from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.simulation.success_fit import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
-from markerplace.testbed.ceiling import SINGLE, ceiling_markdown, run_ceiling, single_placements
 from markerplace.simulation.conditions import CLEAN, split_set
-from markerplace.testbed.config import validate_evaluate_config
-from markerplace.simulation.rendered_images import TestbedImaging
 from markerplace.simulation.map_setup import map_base_key, marker_free_images, testbed_imaging_config
 from markerplace.simulation.marker_sets import build_placements, find_placement_files, method_names, with_candidate_ids
 from markerplace.simulation.metrics import main_threshold, threshold_label
-from markerplace.simulation.pose_sampling import cached_test_poses
 from markerplace.simulation.placement_localization import predict_placements
+from markerplace.simulation.pose_sampling import cached_test_poses
+from markerplace.simulation.rendered_images import TestbedImaging
+from markerplace.simulation.success_fit import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
+from markerplace.testbed.ceiling import SINGLE, ceiling_markdown, run_ceiling, single_placements
+from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.predicted_per_placement import predict_recalls
 from markerplace.testbed.reporting.calibration import write_calibration_report
 from markerplace.testbed.reporting.summary import write_outputs

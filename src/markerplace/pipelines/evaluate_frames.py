@@ -34,12 +34,13 @@ from markerplace.plan.frames.surface import FUSED_NAME
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, write_page
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
-from markerplace.runtime.cache import hash_of
+from markerplace.runtime.cache import config_dict, hash_of
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import world_offset
-from markerplace.runtime.cache import config_dict
 from markerplace.simulation import metrics
+from markerplace.simulation.map_setup import localizer_spec
+from markerplace.simulation.marker_sets import build_placements
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.frames.config import FramesEvalConfig
 from markerplace.testbed.frames.frame_features import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
@@ -47,8 +48,6 @@ from markerplace.testbed.frames.localize import build_map, localize_queries, mar
 from markerplace.testbed.frames.report import frames_markdown, recall_rows, set_label
 from markerplace.testbed.frames.split import block_split
 from markerplace.testbed.frames.store import FeatureStore, image_key
-from markerplace.simulation.map_setup import localizer_spec
-from markerplace.simulation.marker_sets import build_placements
 from markerplace.testbed.reporting.tables import write_recall_csv
 
 log = logging.getLogger(__name__)

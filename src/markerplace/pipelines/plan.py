@@ -25,13 +25,11 @@ from markerplace.markers import Marker, check_markers_on_walls, check_tag_budget
 from markerplace.pipelines.size_guard import check_first_guess, measured_size_check
 from markerplace.plan.config import PlanConfig, validate, warn_unused_settings
 from markerplace.plan.discretize.artifact import Discretization
-from markerplace.plan.discretize.exclusion import (apply_exclusion, describe_changes, load_exclusion,
-                                                   placement_changes, previous_markers)
+from markerplace.plan.discretize.exclusion import apply_exclusion, describe_changes, load_exclusion, placement_changes, previous_markers
 from markerplace.plan.discretize.stage import run_discretize
 from markerplace.plan.observe import run_observe
 from markerplace.plan.place.greedy import check_k
-from markerplace.plan.place.predicted_recall import (model_methods, place_for_target, predicted_recall, score_bound,
-                                              wants_success_model)
+from markerplace.plan.place.predicted_recall import model_methods, place_for_target, predicted_recall, score_bound, wants_success_model
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity
@@ -46,8 +44,8 @@ from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.simulation.success_fit import calibrate_plan
 from markerplace.simulation.map_setup import observed_map_output, testbed_imaging_config
+from markerplace.simulation.success_fit import calibrate_plan
 
 log = logging.getLogger(__name__)
 

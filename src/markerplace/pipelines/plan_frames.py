@@ -39,10 +39,10 @@ from markerplace.plan.discretize.artifact import save as save_discretization
 from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion
 from markerplace.plan.folder import FRAMES_SCENE_PREFIX
 from markerplace.plan.frames.candidates import frame_candidates
-from markerplace.plan.frames.top_view import floor_height, frames_discretization
 from markerplace.plan.frames.observations import run_frame_observe
 from markerplace.plan.frames.poses import plan_intrinsics
 from markerplace.plan.frames.surface import FUSE, frames_key, surface_path
+from markerplace.plan.frames.top_view import floor_height, frames_discretization
 from markerplace.plan.place.greedy import check_k
 from markerplace.plan.place.predicted_recall import predicted_recall, score_bound, wants_success_model
 from markerplace.plan.place.stage import first_pick_gain, place

@@ -37,12 +37,12 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.greedy import apply_coverages
-from markerplace.plan.types import MarkerCoverage
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.visibility import marker_points
+from markerplace.plan.place.greedy import apply_coverages
+from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import build_coverages, geometric_visibility
+from markerplace.plan.types import MarkerCoverage
 
 log = logging.getLogger(__name__)
 

@@ -32,11 +32,10 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig, renders_alike
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from markerplace.imaging.location_views import (FaceLayout, crop, face_layout, location_groups, split_features,
-                                                 unoccluded_from_faces, warp_view)
-from markerplace.render.renderer import RenderResult
+from markerplace.imaging.location_views import FaceLayout, crop, face_layout, location_groups, split_features, unoccluded_from_faces, warp_view
 from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points
 from markerplace.progress import progress_bar
+from markerplace.render.renderer import RenderResult
 from markerplace.runtime import cache
 from markerplace.runtime.atomic_io import write_npy
 from markerplace.runtime.executor import RuntimeConfig, make_executor

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path, fixed, write_json
-from markerplace.runtime import run_folder
 from markerplace.report.deliverables import write_known_tag_maps
 from markerplace.report.figures import floor_map, per_location_mean
+from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import atomic_path, fixed, write_json
 from markerplace.scene.worldframe import discretization_to_user, poses_to_user
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
     L = len(disc.locations)
     loc_drop = per_location_mean(drop, disc.location_index, L)
     loc_p, loc_i = per_location_mean(sp, disc.location_index, L), per_location_mean(si, disc.location_index, L)
-    worst = [int(l) for l in np.argsort(-loc_drop, kind="stable")[:WORST_LOCATIONS] if loc_drop[l] > LOSS_TOLERANCE]
+    worst = [int(i) for i in np.argsort(-loc_drop, kind="stable")[:WORST_LOCATIONS] if loc_drop[i] > LOSS_TOLERANCE]
     rows = []
     for r in result.rows:
         P, Q = _user(r.planned, offset), _user(r.installed, offset)
@@ -66,10 +66,10 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
                      "installed_position": None if Q is None else Q[:3, 3].tolist(),
                      "installed_normal": None if Q is None else Q[:3, 2].tolist(), "move": r.move, "note": r.note})
     storeys = np.asarray(disc.storeys, float)
-    worst_rows = [{"storey": int(disc.location_storey[l]), "floor_z": float(storeys[disc.location_storey[l]]),
-                   "x": float(disc.locations[l, 0]), "y": float(disc.locations[l, 1]),
-                   "score_planned": float(loc_p[l]), "score_installed": float(loc_i[l]),
-                   "score_lost": float(loc_drop[l])} for l in worst]
+    worst_rows = [{"storey": int(disc.location_storey[i]), "floor_z": float(storeys[disc.location_storey[i]]),
+                   "x": float(disc.locations[i, 0]), "y": float(disc.locations[i, 1]),
+                   "score_planned": float(loc_p[i]), "score_installed": float(loc_i[i]),
+                   "score_lost": float(loc_drop[i])} for i in worst]
     summary = {"num_poses": int(len(sp)), "mean_score_planned": float(sp.mean()),
                "mean_score_installed": float(si.mean()), "mean_score_lost": float(drop.mean()),
                "p10_score_planned": float(np.percentile(sp, 10)), "p10_score_installed": float(np.percentile(si, 10)),

@@ -46,17 +46,14 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.runtime.atomic_io import atomic_path
-from markerplace.scan.frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
-                       read_intrinsics)
+from markerplace.runtime.atomic_io import atomic_path, write_image, write_json
 from markerplace.scan.frame_images import load_frame
+from markerplace.scan.frameset import FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers, read_intrinsics
 from markerplace.scan.nerfstudio import read_nerfstudio
 from markerplace.scan.sevenscenes import GRAVITY_FILE, read_7scenes, read_gravity
 from markerplace.scan.stray import STRAY_UP, STRAY_UP_SOURCE, read_stray
 from markerplace.scan.tum import TUM_MAX_DT, read_tum
-from markerplace.scan.up import (SPREAD_WARN_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_cameras, parse_up,
-                                 world_from_input)
-from markerplace.runtime.atomic_io import write_image, write_json
+from markerplace.scan.up import SPREAD_WARN_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_cameras, parse_up, world_from_input
 
 log = logging.getLogger(__name__)
 

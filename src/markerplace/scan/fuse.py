@@ -30,8 +30,8 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, invert
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.progress import track
+from markerplace.runtime.atomic_io import atomic_path
 from markerplace.scan.frames import load_frame
 from markerplace.scan.frameset import FrameSet, frame_intrinsics
 from markerplace.scan.up import MESH_REFINE_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_mesh, world_from_input

@@ -12,9 +12,9 @@ import os
 from pathlib import Path
 
 from markerplace.errors import UserError
-from markerplace.scene.types import MeshPart, Room, Scene
 from markerplace.scene.builtin.catalogue import builtin_names, get_builtin
 from markerplace.scene.loader import SUPPORTED_EXTENSIONS, load_mesh_file
+from markerplace.scene.types import MeshPart, Room, Scene
 
 log = logging.getLogger(__name__)
 

@@ -17,13 +17,13 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.imaging.config import SIFT_DEFAULT, renders_alike
+from markerplace.localization.vlad import VladCodebook
+from markerplace.plan.observe import MapOutput
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
 from markerplace.simulation.conditions import CLEAN, QueryCondition, set_name
-from markerplace.plan.observe import MapOutput
-from markerplace.simulation.rendered_images import BaseImages, TestbedImaging, base_features_key
 from markerplace.simulation.placement_localization import ImageSet, PredictContext
-from markerplace.localization.vlad import VladCodebook
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging, base_features_key
 
 log = logging.getLogger(__name__)
 

@@ -17,13 +17,12 @@ import numpy as np
 
 from markerplace.imaging.engine import ImagingEngine
 from markerplace.imaging.features import FeatureSet, ImageFeatures
-from markerplace.runtime.atomic_io import write_json, write_npy
-from markerplace.markers import Marker
 from markerplace.localization.database import MapDatabase
 from markerplace.localization.localizer import get_localizer
 from markerplace.localization.tags import TagDetection
 from markerplace.localization.vlad import VladCodebook
-from markerplace.markers import marker_from_json
+from markerplace.markers import Marker, marker_from_json
+from markerplace.runtime.atomic_io import write_json, write_npy
 
 __all__ = ["save_map", "load_map_database", "localize_features", "localize_task"]
 

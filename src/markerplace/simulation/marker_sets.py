@@ -6,17 +6,16 @@ sensitivity studies.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.plan.place.methods import PLACEMENT_METHODS
-import logging
-from dataclasses import replace
 from markerplace.markers import Marker
+from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.plan.place.stage import place
 from markerplace.tagfamily import NUM_TAGS
 

@@ -25,17 +25,17 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from markerplace.imaging.features import ImageFeatures
-from markerplace.tagfamily import DRAWING_VERSION
+from markerplace.localization.localizer import LOCALIZERS
+from markerplace.localization.vlad import nearest
+from markerplace.registry import configure
 from markerplace.runtime import cache, run_folder
 from markerplace.simulation.conditions import QueryCondition
-from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
 from markerplace.simulation.maps import localize_task, save_map
 from markerplace.simulation.marker_sets import NO_MARKERS
 from markerplace.simulation.prediction_store import PartialPrediction, load_prediction, save_prediction
 from markerplace.simulation.render_store import RenderStore
-from markerplace.localization.localizer import LOCALIZERS
-from markerplace.localization.vlad import nearest
-from markerplace.registry import configure
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
+from markerplace.tagfamily import DRAWING_VERSION
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,14 +14,13 @@ the whole prediction is saved.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
 
-import logging
-
-from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime import cache, run_folder
+from markerplace.runtime.atomic_io import write_npz
 
 log = logging.getLogger(__name__)
 

@@ -22,8 +22,8 @@ from typing import Iterable
 import numpy as np
 
 from markerplace.imaging.features import FeatureSet, ImageFeatures
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import atomic_path
 
 log = logging.getLogger(__name__)
 

@@ -21,10 +21,10 @@ import numpy as np
 from markerplace.imaging.engine import EngineSpec, ImagingEngine, imaging_job, marker_key
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points, select_in_view
-from markerplace.runtime.atomic_io import write_npy
 from markerplace.markers import Marker
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache, run_folder
+from markerplace.runtime.atomic_io import write_npy
 from markerplace.simulation.conditions import QueryCondition, render_query
 
 log = logging.getLogger(__name__)

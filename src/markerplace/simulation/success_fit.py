@@ -43,22 +43,22 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.imaging.engine import marker_key
-from markerplace.runtime.atomic_io import write_json
 from markerplace.markers import FAMILY, Marker
-from markerplace.runtime import cache
-from markerplace.runtime.stages import cached
-from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
-from markerplace.simulation.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
-from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from markerplace.simulation.marker_sets import NO_MARKERS, PlacementRun, candidate_of
-from markerplace.simulation.placement_localization import ImageSet, PredictContext, predict_placements
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel, fit_success_model
+from markerplace.runtime import cache
+from markerplace.runtime.atomic_io import write_json
+from markerplace.runtime.stages import cached
 from markerplace.simulation import pose_sampling as tp
 from markerplace.simulation.config import LocalizationConfig
+from markerplace.simulation.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+from markerplace.simulation.marker_sets import NO_MARKERS, PlacementRun, candidate_of
+from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.simulation.placement_localization import ImageSet, PredictContext, predict_placements
+from markerplace.simulation.rendered_images import BaseImages, TestbedImaging
 
 log = logging.getLogger(__name__)
 

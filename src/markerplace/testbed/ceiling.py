@@ -30,11 +30,10 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.markers import FAMILY, Marker
+from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, baseline_methods, with_candidate_ids
 from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from markerplace.simulation.success_fit import MAP_SET
-from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, with_candidate_ids
 from markerplace.simulation.placement_localization import PredictContext, predict_placements
-from markerplace.simulation.marker_sets import baseline_methods
+from markerplace.simulation.success_fit import MAP_SET
 
 log = logging.getLogger(__name__)
 

@@ -5,18 +5,17 @@ recall is counted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from markerplace.errors import UserError
-from markerplace.settings import SEED_MAX, setting
-from markerplace.simulation.config import LocalizationConfig
-from markerplace.simulation.conditions import CLEAN, CONDITIONS
-from markerplace.simulation.metrics import THRESHOLDS
-from markerplace.simulation.marker_sets import NO_MARKERS, method_names
-from markerplace.simulation.pose_sampling import ALL_TEST_SETS, TEST_SETS, WHERE_SET
-from dataclasses import fields
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.settings import SEED_MAX, setting
+from markerplace.simulation.conditions import CLEAN, CONDITIONS
+from markerplace.simulation.config import LocalizationConfig
+from markerplace.simulation.marker_sets import NO_MARKERS, method_names
+from markerplace.simulation.metrics import THRESHOLDS
+from markerplace.simulation.pose_sampling import ALL_TEST_SETS, TEST_SETS, WHERE_SET
 from markerplace.validation import check_evaluate_config, parse_int_list
 
 #: ``--tag-ids`` choices (:attr:`StudyConfig.tag_ids`).

@@ -30,9 +30,9 @@ import logging
 import numpy as np
 
 from markerplace.plan.place.predicted_recall import marker_set_curve
-from markerplace.simulation.success_fit import placement_candidates
 from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES
 from markerplace.simulation.pose_sampling import sampling_probabilities
+from markerplace.simulation.success_fit import placement_candidates
 
 log = logging.getLogger(__name__)
 

@@ -34,15 +34,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from markerplace.plan.place.method_registry import PLACEMENT_METHODS
-from markerplace.registry import configure
-from markerplace.plan.place.human import HumanConfig, human_placement
+from markerplace.errors import UserError
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.config import CALIBRATION_POSES, PlacementConfig
-from markerplace.plan.place.greedy import apply_coverages, omp_greedy
-from markerplace.plan.types import PlanData
-from markerplace.errors import UserError
 from markerplace.plan.place.expected_recall import expected_recall_greedy
+from markerplace.plan.place.greedy import apply_coverages, omp_greedy
+from markerplace.plan.place.human import HumanConfig, human_placement
+from markerplace.plan.place.method_registry import PLACEMENT_METHODS
+from markerplace.plan.types import PlanData
+from markerplace.registry import configure
 
 log = logging.getLogger(__name__)
 

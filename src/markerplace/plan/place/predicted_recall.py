@@ -27,11 +27,11 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.markers import Marker, free_tag_ids
-from markerplace.plan.place.upper_bounds import recall_upper_bound, score_upper_bound
 from markerplace.plan.place.config import PlacementConfig
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_named
 from markerplace.plan.place.recall_curve import KNEE_POINTS, knee, recall_curve, target_count
 from markerplace.plan.place.stage import place
+from markerplace.plan.place.upper_bounds import recall_upper_bound, score_upper_bound
 from markerplace.plan.types import Placement, PlanData
 
 log = logging.getLogger(__name__)

@@ -24,8 +24,8 @@ from markerplace.markers import Marker
 from markerplace.progress import progress_bar
 from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.runtime.cache import hash_of
-from markerplace.testbed.frames.store import FeatureStore, image_key
 from markerplace.simulation.maps import localize_task, save_map
+from markerplace.testbed.frames.store import FeatureStore, image_key
 
 log = logging.getLogger(__name__)
 

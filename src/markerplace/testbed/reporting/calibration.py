@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.plan.score.success_model import calibration_curve, fit_success_model, roc_auc
+from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.testbed.reporting.tables import md_text
 
 __all__ = ["write_calibration_report"]

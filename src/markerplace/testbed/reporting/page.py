@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, png_file_uri, png_uri, table, write_page
 from markerplace.plan.discretize.artifact import load as load_disc
 from markerplace.render.renderer import Renderer
+from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, png_file_uri, png_uri, table, write_page
 from markerplace.scene.worldframe import world_offset
 from markerplace.simulation import metrics
 from markerplace.simulation.conditions import CLEAN

@@ -12,17 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.report.figures import recall_vs_k
-from markerplace.runtime.atomic_io import write_json, write_npz
+from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
 from markerplace.runtime.cache import config_dict
 from markerplace.simulation import metrics
 from markerplace.simulation.conditions import set_name, split_set
 from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
-from markerplace.testbed.reporting.predicted_tables import (error_summary, log_predicted, predicted_markdown, predicted_rows,
-                                                    write_predicted_csv)
 from markerplace.testbed.reporting.paired import condition_markdown, paired_differences, paired_markdown, paired_table
+from markerplace.testbed.reporting.predicted_tables import error_summary, log_predicted, predicted_markdown, predicted_rows, write_predicted_csv
 from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
 
 __all__ = ["write_outputs"]

@@ -26,8 +26,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.runtime.atomic_io import atomic_path
 from markerplace.simulation.conditions import CLEAN, set_name, split_set
 from markerplace.simulation.marker_sets import NO_MARKERS
 
