@@ -12,20 +12,19 @@ from __future__ import annotations
 
 import argparse
 import logging
+from dataclasses import replace
 from typing import Sequence
 
-from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
-from dataclasses import replace
 from markerplace.config_file import read_config_file
 from markerplace.markers import check_tag_budget
 from markerplace.plan.config import PlanConfig
-from markerplace.plan.place.config import K_ALL
 from markerplace.plan.discretize.candidate_rules import parse_allow as parse
+from markerplace.plan.place.config import K_ALL
 from markerplace.settings import add_setting_args, apply, values_from_args
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow", "parse_level", "parse_xy",
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow",
            "plan_config_from_args", "plan_config_for_budgets"]
 
 
