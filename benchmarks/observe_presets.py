@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.imaging.config import SIFT_DEFAULT
 from markerplace.imaging.engine import EngineSpec, ImagingEngine
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.localization.tags import detect_tags
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.discretize.stage import run_discretize

@@ -8,9 +8,10 @@ import pytest
 
 from helpers import undeclared_outputs
 from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
-from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
+from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import marker_points, markers_in_view
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.markers import Marker
 from markerplace.pipelines.evaluate import EVALUATE_OUTPUTS
 from markerplace.runtime.executor import InProcessExecutor

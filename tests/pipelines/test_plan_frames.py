@@ -148,7 +148,7 @@ def test_a_7scenes_copy_of_the_frames_plans_the_same_spots(prepared, tiny, tmp_p
     plan as the project's own layout does."""
     from helpers.frame_layouts import write_7scenes
     from markerplace.geometry import invert
-    from markerplace.scan.frames import load_frame
+    from markerplace.scan.frame_images import load_frame
 
     fs, _, data = prepared
     c, s_ = np.cos(np.radians(100.0)), np.sin(np.radians(100.0))

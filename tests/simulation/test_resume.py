@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from markerplace.geometry import world_from_cam_pose, world_from_marker_pose
-from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
+from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import FeatureSet
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.markers import Marker
 from markerplace.pipelines.evaluate import run_evaluation
 from markerplace.plan.config import PlanConfig

@@ -23,7 +23,7 @@ from markerplace.plan.similarity.config import SimilarityConfig
 from markerplace.runtime.executor import RuntimeConfig
 from markerplace.validation import check_plan_config
 
-__all__ = ["PlanConfig", "PlacementConfig", "validate", "warn_unused_settings"]
+__all__ = ["PlanConfig", "validate", "warn_unused_settings"]
 
 log = logging.getLogger(__name__)
 

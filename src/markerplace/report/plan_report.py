@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.markers import load_markers
-from markerplace.plan.discretize.wall_candidates import RULES, rule_words
+from markerplace.plan.discretize.candidate_rules import RULES, rule_words
 from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.report.html import esc, img, jpeg_uri, png_file_uri, table, write_page
 from markerplace.report.installer import render_installer_views

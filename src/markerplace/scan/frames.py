@@ -47,7 +47,6 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
 from markerplace.runtime.atomic_io import atomic_path, write_image, write_json
-from markerplace.scan.frame_images import load_frame
 from markerplace.scan.frameset import FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers, read_intrinsics
 from markerplace.scan.nerfstudio import read_nerfstudio
 from markerplace.scan.sevenscenes import GRAVITY_FILE, read_7scenes, read_gravity
@@ -239,5 +238,5 @@ class FrameWriter:
 
 
 __all__ = ["FORMATS", "MARKERPLACE_DEPTH_SCALE", "READERS", "detect_format", "read_markerplace", "layout_up", "orient",
-           "open_frameset", "load_frame",
+           "open_frameset",
            "FrameWriter"]

@@ -42,11 +42,12 @@ from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization
+from markerplace.plan.discretize.candidate_rules import RULES, CandidateConfig, SurfaceLabels, rule_words
 from markerplace.plan.discretize.floorplan import eye_level_support, storey_floor
 from markerplace.plan.discretize.freespace import Sections, StoreySpace, camera_locations, free_space, obstacle_mask, open_fractions
 from markerplace.plan.discretize.grid import Grid
 from markerplace.plan.discretize.storeys import FloorConfig, cast_columns, find_storeys
-from markerplace.plan.discretize.wall_candidates import RULES, CandidateConfig, SurfaceLabels, rule_words, wall_candidates
+from markerplace.plan.discretize.wall_candidates import wall_candidates
 from markerplace.runtime import cache
 from markerplace.runtime.cache import config_dict
 from markerplace.runtime.stages import cached

@@ -26,7 +26,7 @@ from markerplace.localization.sift import extract_sift, lift_to_3d
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
 from markerplace.runtime.stages import cached
-from markerplace.scan.frames import load_frame
+from markerplace.scan.frame_images import load_frame
 
 log = logging.getLogger(__name__)
 

@@ -40,7 +40,7 @@ from markerplace.localization.tags import detect_tags
 from markerplace.markers import Marker
 from markerplace.runtime.cache import hash_of
 from markerplace.runtime.executor import WorkerJob
-from markerplace.scan.frames import load_frame
+from markerplace.scan.frame_images import load_frame
 from markerplace.scan.frameset import FrameSet
 from markerplace.scene.spec import SceneSpec
 
