@@ -217,6 +217,27 @@ def planner_testbed_imports(root: Path = ROOT) -> list[list[str]]:
     return out
 
 
+TESTS = ROOT.parents[1] / "tests"
+
+
+def untested_modules(root: Path = ROOT, tests: Path = TESTS) -> list[str]:
+    """Modules (paths relative to ``root``, ``__init__`` left out) that no test file
+    (``tests/**/test_*.py``) imports: ``import a.b``, ``from a.b import x``, ``from a import b``,
+    or a string naming the module (a ``monkeypatch`` target, ``importlib``)."""
+    named: set[str] = set()
+    for path in sorted(tests.rglob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                named.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                named.add(node.module)
+                named.update(f"{node.module}.{alias.name}" for alias in node.names)
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                named.add(node.value)
+    return sorted(path.relative_to(root).as_posix() for name, path in module_files(root).items()
+                  if path.name != "__init__.py" and name not in named)
+
+
 SHARED_NAMES = {
     "__init__": "a package's docstring",
     "config": "a package's settings (one frozen dataclass per stage or part)",

@@ -149,6 +149,36 @@ def test_the_checker_finds_a_planner_import_of_the_testbed(tmp_path, layout):
     assert ["markerplace.plan.stage", "markerplace.testbed.ceiling"] in layout.planner_testbed_imports(pkg)
 
 
+def _documented_untested() -> dict[str, str]:
+    text = (REPO / "docs" / "contributing.md").read_text(encoding="utf-8")
+    section = text.split("### Modules no unit test imports", 1)[1].split("\n#", 1)[0]
+    rows = [line.split("|") for line in section.splitlines() if line.startswith("| `")]
+    return {row[1].strip().strip("`"): row[2].strip() for row in rows}
+
+
+def test_every_module_is_imported_by_a_test_or_listed_with_its_reason(layout):
+    listed = _documented_untested()
+    found = set(layout.untested_modules())
+    assert listed and all(listed.values())
+    missing = sorted(found - set(listed))
+    assert not missing, ("modules no test file imports: add a unit test, or list each with its reason in "
+                         f"docs/contributing.md (Modules no unit test imports): {missing}")
+    stale = sorted(set(listed) - found)
+    assert not stale, f"listed in docs/contributing.md as imported by no test, but a test imports them (or gone): {stale}"
+
+
+def test_the_checker_finds_a_module_no_test_imports(tmp_path, layout):
+    pkg, tests = tmp_path / "markerplace", tmp_path / "tests"
+    (pkg / "sub").mkdir(parents=True)
+    tests.mkdir()
+    for name in ("__init__.py", "a.py", "b.py", "c.py", "sub/__init__.py", "sub/d.py"):
+        (pkg / name).write_text("")
+    (tests / "test_x.py").write_text("import markerplace.a\nfrom markerplace.sub import d\n"
+                                     "TARGET = 'markerplace.c'\n")
+    (tests / "helper.py").write_text("from markerplace import b\n")  # not a test file
+    assert layout.untested_modules(pkg, tests) == ["b.py"]
+
+
 def test_no_module_over_the_limit(layout):
     sizes = layout.line_counts()
     over = {m: n for m, n in sizes.items() if n > MAX_LINES and m not in ALLOWED_OVER}
