@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.plan.discretize import artifact as discretization
+from markerplace.simulation.marker_sets import NO_MARKERS
+from markerplace.simulation.pose_sampling import TestPoses
+from markerplace.simulation.prediction_store import load_prediction
 from markerplace.testbed.ceiling import SINGLE, covered, held_out_gains, oracle_order, single_tag_hits
-from markerplace.testbed.marker_sets import NO_MARKERS
-from markerplace.testbed.poses import TestPoses
-from markerplace.testbed.prediction_store import load_prediction
 
 
 def cached_single_tag_hits(run_dir: Path, test_set: str) -> tuple[np.ndarray, np.ndarray]:

@@ -77,7 +77,7 @@ def copy_plan(plan: Path, dest: Path) -> dict:
 
 def test_poses(data, plan_config, mode: str, num: int, seed: int, min_clearance: float):
     """``num`` test poses drawn as ``evaluate`` draws a test set (its seed here ``seed``)."""
-    from markerplace.testbed import poses as tp
+    from markerplace.simulation import pose_sampling as tp
 
     disc = data.disc
     layer = {int(st): k for k, st in enumerate(disc.planned_storeys)}
@@ -109,8 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
 
     from markerplace.imaging.engine import ImagingEngine
-    from markerplace.localization.features import extract_sift
     from markerplace.localization.localizer import get_localizer
+    from markerplace.localization.sift import extract_sift
     from markerplace.localization.tags import detect_tags
     from markerplace.markers import load_markers
     from markerplace.pipelines.plan import prepare
@@ -120,12 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     from markerplace.runtime.workers import single_threaded_libraries
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
-    from markerplace.testbed.config import LocalizationConfig, TestSetConfig
-    from markerplace.testbed.images import TestbedImaging
-    from markerplace.testbed.map_setup import (localizer_spec, map_base_key, map_images, testbed_imaging_config,
-                                               vlad_codebook)
-    from markerplace.testbed.maps import load_map_database, localize_features
-    from markerplace.testbed.predict import PlacementMaps
+    from markerplace.simulation.config import LocalizationConfig
+    from markerplace.simulation.map_setup import localizer_spec, map_base_key, map_images, testbed_imaging_config, vlad_codebook
+    from markerplace.simulation.maps import load_map_database, localize_features
+    from markerplace.simulation.placement_localization import PlacementMaps
+    from markerplace.simulation.rendered_images import TestbedImaging
+    from markerplace.testbed.config import TestSetConfig
 
     placement = args.placement or args.plan / "placement.json"
     single_threaded_libraries()

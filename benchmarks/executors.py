@@ -35,9 +35,9 @@ def _build(spec):
 
 
 def main(argv=None) -> None:
+    from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
     from markerplace.plan.observe import observe
-    from markerplace.plan.config import PlanConfig
     from markerplace.plan.score.stage import geometric_visibility
     from markerplace.runtime.executor import RuntimeConfig, WorkerJob, make_executor
     from markerplace.scene.spec import SceneSpec

@@ -48,7 +48,6 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-
 from scan_plan import MemorySampler, emit  # benchmarks/ is on sys.path when run as a script
 
 STAGES = ("load", "discretize", "observe", "similarity", "score")
@@ -112,9 +111,9 @@ def stage_windows(timings: dict, t0: float, t1: float) -> dict[str, tuple[float,
 
 def plan_end_to_end(args, run_dir: Path):
     """Plan ``args.scene`` in ``run_dir``; returns (data, placement, sampler, windows, config)."""
-    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.pipelines.plan import prepare
     from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.place.config import PlacementConfig
     from markerplace.plan.place.stage import place
     from markerplace.runtime.executor import RuntimeConfig

@@ -149,14 +149,14 @@ def main(argv: list[str] | None = None) -> int:
     import cv2
 
     from markerplace.imaging.engine import EngineSpec, ImagingEngine
-    from markerplace.localization.features import _sift, to_gray
+    from markerplace.localization.sift import _sift, to_gray
     from markerplace.markers import load_markers
     from markerplace.plan.config import PlanConfig
     from markerplace.runtime.workers import single_threaded_libraries
     from markerplace.scene.spec import SceneSpec
     from markerplace.scene.worldframe import markers_to_internal, world_offset
-    from markerplace.testbed.map_setup import testbed_imaging_config
-    from markerplace.testbed.poses import TestPoses
+    from markerplace.simulation.map_setup import testbed_imaging_config
+    from markerplace.simulation.pose_sampling import TestPoses
 
     single_threaded_libraries()
     cv2.setNumThreads(1)

@@ -2,7 +2,7 @@
 
 ``plan``'s observe stage (:mod:`markerplace.plan.observe`) renders every feasible pose and
 extracts SIFT with the scoring preset; ``evaluate``'s marker-free map
-(:class:`~markerplace.testbed.images.BaseImages`) renders the same poses again and extracts SIFT
+(:class:`~markerplace.simulation.rendered_images.BaseImages`) renders the same poses again and extracts SIFT
 with OpenCV's defaults and detects tags. This times, per pose, on a sample of a scene's
 feasible poses in one process: the render (RGB and depth), the scoring preset's features, the
 default preset's features plus tag detection, and a depth-only render (what the map's in-view
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.imaging.config import SIFT_DEFAULT
 from markerplace.imaging.engine import EngineSpec, ImagingEngine
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.localization.tags import detect_tags
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.discretize.stage import run_discretize

@@ -37,10 +37,9 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import spearmanr
-
 from plan_speedup import REPO, plan_figures, run_plan, scene_args  # benchmarks/ is on sys.path
 from scan_plan import emit
+from scipy.stats import spearmanr
 
 GOAL_RANK = 0.98
 

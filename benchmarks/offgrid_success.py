@@ -20,8 +20,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from markerplace.plan.discretize import artifact as discretization
-from markerplace.testbed.calibration import offgrid_poses
-from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.simulation.success_fit import offgrid_poses
 
 
 def _no_marker_prediction(plan_dir: Path) -> np.ndarray:

@@ -30,14 +30,9 @@ import numba
 import numpy as np
 
 from markerplace.geometry import Intrinsics, world_from_cam_poses, world_from_marker_pose
-from markerplace.plan.score.localizability import (
-    NoiseConfig,
-    entropy,
-    marker_visibility,
-    pose_information,
-)
-from markerplace.plan.score.marker_models import get_marker_model
 from markerplace.plan.place.greedy import omp_greedy
+from markerplace.plan.score.localizability import NoiseConfig, entropy, marker_visibility, pose_information
+from markerplace.plan.score.marker_models import get_marker_model
 from markerplace.plan.types import MarkerCoverage
 
 GOAL_SPEEDUP = 1000.0
@@ -210,11 +205,11 @@ def part_c(args) -> None:
     import resource
     import tempfile
 
-    from markerplace.scene.spec import SceneSpec
     from markerplace.pipelines.plan import prepare
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.place.config import PlacementConfig
     from markerplace.plan.place.stage import place
+    from markerplace.scene.spec import SceneSpec
 
     config = PlanConfig(placement=PlacementConfig(k=args.k))
     with tempfile.TemporaryDirectory() as run_dir:

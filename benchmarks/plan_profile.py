@@ -61,7 +61,6 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-
 from run_estimate import house_scan, markerplace_exe  # benchmarks/ is on sys.path when run as a script
 from scan_plan import emit
 
@@ -263,7 +262,7 @@ def per_pose(args, spec, up, out: Path) -> None:
     from markerplace.imaging.engine import EngineSpec, ImagingEngine
     from markerplace.imaging.features import FeatureWriter, ImageFeatures
     from markerplace.imaging.visibility import marker_points
-    from markerplace.localization.features import extract_sift, lift_to_3d
+    from markerplace.localization.sift import extract_sift, lift_to_3d
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.artifact import load as load_discretization
     from markerplace.plan.score.stage import geometric_visibility
@@ -343,7 +342,7 @@ def per_frame(args, out: Path) -> None:
 
     from markerplace.imaging.features import FeatureWriter, ImageFeatures
     from markerplace.imaging.visibility import marker_points, markers_unoccluded
-    from markerplace.localization.features import extract_sift, lift_to_3d
+    from markerplace.localization.sift import extract_sift, lift_to_3d
     from markerplace.pipelines.plan_frames import frames_config
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.artifact import load as load_discretization

@@ -42,11 +42,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import spearmanr
-
 from plan_profile import TreeSampler  # benchmarks/ is on sys.path when run as a script
 from run_estimate import markerplace_exe
 from scan_plan import emit
+from scipy.stats import spearmanr
 
 REPO = Path(__file__).resolve().parents[1]
 GOAL_SPEEDUP = 3.0

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.testbed.conditions import split_set
-from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask
+from markerplace.simulation.conditions import split_set
+from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask
 
 REGION = re.compile(r"^(?P<name>[^:]+):(?P<axis>[xyz])(?P<op>[<>])(?P<value>-?[0-9.]+)$")
 

@@ -131,12 +131,12 @@ def part_a(args) -> None:
 def part_b(args) -> None:
     import tempfile
 
-    from markerplace.scene.spec import SceneSpec
     from markerplace.pipelines.plan import prepare
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.place.config import PlacementConfig
     from markerplace.plan.place.stage import place
     from markerplace.scene import load_scene
+    from markerplace.scene.spec import SceneSpec
 
     path, t_scan = scan_of(args.big_scene, args.big_voxel, Path(args.cache))
     faces = load_scene(str(path), up="z").num_faces

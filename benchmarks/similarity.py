@@ -64,8 +64,8 @@ if ARGS is not None and ARGS.threads:  # before numpy loads its BLAS
 import numpy as np  # noqa: E402
 
 from markerplace.plan.similarity.config import SimilarityConfig
-from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 from markerplace.plan.similarity.quality import measure_error, synthetic_descriptors  # noqa: E402
+from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from similarity_reference import ReferenceConfig, count_similar_reference  # noqa: E402

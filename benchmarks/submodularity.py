@@ -1,12 +1,12 @@
 """How often does the expected-recall objective break diminishing returns? And how tight are the bounds?
 
 ``F(T) = sum_p P(s_p(T))`` (docs/design.md section 6c) is monotone but not submodular. This
-samples random nested pairs S in T and a tag m outside T (:func:`markerplace.plan.place.bounds.submodularity_sample`)
+samples random nested pairs S in T and a tag m outside T (:func:`markerplace.plan.place.upper_bounds.submodularity_sample`)
 and prints the share where ``Delta(m | S) < Delta(m | T)``, the worst excess, and the smallest
 sampled submodularity ratio (Das & Kempe; a sampled minimum over-estimates the true ratio, so it
 is a diagnostic, never a bound), for F and for the mean score (submodular: 0 violations). Then
 the expected-recall greedy's predicted recall at k against the valid per-pose upper bound of
-any k tags (:func:`markerplace.plan.place.bounds.recall_upper_bound`) and, where there are at
+any k tags (:func:`markerplace.plan.place.upper_bounds.recall_upper_bound`) and, where there are at
 most 5000 k-subsets, the true best k-set by exhaustive search.
 
 Two sources: random synthetic problems with the logistic's midpoint ``--above`` nats over the
@@ -30,10 +30,10 @@ import numpy as np
 
 from markerplace.pipelines.plan import prepare
 from markerplace.plan.config import PlanConfig
-from markerplace.plan.place.bounds import recall_upper_bound, submodularity_sample
 from markerplace.plan.place.expected_recall import expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.place.recall_curve import recall_curve
+from markerplace.plan.place.upper_bounds import recall_upper_bound, submodularity_sample
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import coverages_with_model
 from markerplace.plan.score.success_model import SuccessModel

@@ -37,17 +37,17 @@ import json
 import shutil
 import subprocess
 import sys
-
-import numpy as np
 import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from markerplace.testbed.metrics import hit_mask  # noqa: E402
-from markerplace.testbed.render_store import RenderStore  # noqa: E402
+from markerplace.simulation.metrics import hit_mask  # noqa: E402
+from markerplace.simulation.render_store import RenderStore  # noqa: E402
 
 MODES = ("order", "candidate")
 #: what the candidate run does not take over from the order run: everything made with tags

@@ -18,7 +18,12 @@ and ``a.b``, which count as edges too.
   (a type annotation is a dependency too; shared types live in a types module instead);
 * **package-level cycles**: at every level of the package tree, the graph between sibling
   packages and modules (:func:`package_graphs`), with every import counted;
-* **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`.
+* **imports inside functions**: only of the short list :data:`HEAVY_OPTIONAL`;
+* **the planner apart from the testbed**: nothing a plan runs (:data:`PLANNER`: ``plan/``,
+  ``pipelines/plan.py``, ``pipelines/plan_frames.py``) imports ``testbed/``, directly or through
+  what it imports (:func:`planner_testbed_imports`); what both use lives in ``simulation/``;
+* **module names**: one file name per meaning: no two modules share a file name
+  (:func:`repeated_names`) except those of :data:`SHARED_NAMES`.
 
 Exit status 1 when any of these is found or a module is over ``--fail-lines`` (when given),
 0 otherwise. ``tests/test_layout.py`` runs the same functions with its allow-list.
@@ -178,6 +183,81 @@ def deferred_imports(root: Path = ROOT) -> list[tuple[str, int, str]]:
     return sorted(out)
 
 
+PLANNER = ("markerplace.plan", "markerplace.pipelines.plan", "markerplace.pipelines.plan_frames")
+"""Modules (and packages, with everything in them) that a plan runs."""
+TESTBED = "markerplace.testbed"
+"""The evaluation package no planner module may reach."""
+
+
+def planner_testbed_imports(root: Path = ROOT) -> list[list[str]]:
+    """For every testbed module that a :data:`PLANNER` module reaches through imports (every
+    import counted: inside functions and under ``if TYPE_CHECKING:`` too), one import chain
+    ``[planner module, ..., testbed module]`` (the shortest found)."""
+    graph = import_graph(root, deferred=True, type_checking=True)
+
+    def within(module: str, names) -> bool:
+        return any(module == n or module.startswith(n + ".") for n in names)
+
+    starts = sorted(m for m in graph if within(m, PLANNER))
+    prev: dict[str, str | None] = {m: None for m in starts}
+    queue = list(starts)
+    while queue:
+        v = queue.pop(0)
+        for w in sorted(graph[v]):
+            if w not in prev:
+                prev[w] = v
+                queue.append(w)
+    out = []
+    for m in sorted(prev):
+        if within(m, (TESTBED,)) and (prev[m] is None or not within(prev[m], (TESTBED,))):
+            chain = [m]
+            while prev[chain[-1]] is not None:
+                chain.append(prev[chain[-1]])
+            out.append(chain[::-1])
+    return out
+
+
+TESTS = ROOT.parents[1] / "tests"
+
+
+def untested_modules(root: Path = ROOT, tests: Path = TESTS) -> list[str]:
+    """Modules (paths relative to ``root``, ``__init__`` left out) that no test file
+    (``tests/**/test_*.py``) imports: ``import a.b``, ``from a.b import x``, ``from a import b``,
+    or a string naming the module (a ``monkeypatch`` target, ``importlib``)."""
+    named: set[str] = set()
+    for path in sorted(tests.rglob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                named.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                named.add(node.module)
+                named.update(f"{node.module}.{alias.name}" for alias in node.names)
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                named.add(node.value)
+    return sorted(path.relative_to(root).as_posix() for name, path in module_files(root).items()
+                  if path.name != "__init__.py" and name not in named)
+
+
+SHARED_NAMES = {
+    "__init__": "a package's docstring",
+    "config": "a package's settings (one frozen dataclass per stage or part)",
+    "stage": "a plan stage package's entry: its cached run function (plan/discretize, similarity, score, place)",
+    "types": "a package's shared hand-over types, kept apart from the modules that use them (plan, scene)",
+}
+"""File names (without ``.py``) that several modules may carry, each with its reason: the name
+means the same thing in every package that has it. Any other name is one module's."""
+
+
+def repeated_names(root: Path = ROOT) -> dict[str, list[str]]:
+    """File name -> the modules (paths relative to ``root``'s parent) that share it, for every
+    name not in :data:`SHARED_NAMES` carried by more than one module."""
+    by_name: dict[str, list[str]] = {}
+    for path in sorted(root.rglob("*.py")):
+        if path.stem not in SHARED_NAMES:
+            by_name.setdefault(path.stem, []).append(path.relative_to(root.parent).as_posix())
+    return {name: paths for name, paths in sorted(by_name.items()) if len(paths) > 1}
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan), each sorted, largest first."""
     index: dict[str, int] = {}
@@ -279,7 +359,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"imports inside functions (other than {len(HEAVY_OPTIONAL)} heavy optional modules): {len(inner)}")
     for name, line, mod in inner[:40]:
         print(f"  {name}:{line}: {mod}")
-    if full_cycles or tc_cycles or pkg_cycles or inner:
+    reach = planner_testbed_imports(args.root)
+    print(f"testbed modules a plan imports: {len(reach)}")
+    for chain in reach:
+        print("  " + " -> ".join(chain))
+    repeated = repeated_names(args.root)
+    print(f"file names shared by several modules (other than {', '.join(sorted(SHARED_NAMES))}): {len(repeated)}")
+    for name, paths in repeated.items():
+        print(f"  {name}.py: {', '.join(paths)}")
+    if full_cycles or tc_cycles or pkg_cycles or inner or repeated or reach:
         status = 1
     if args.fail_lines is not None and any(n > args.fail_lines for n, _ in big):
         status = 1

@@ -53,8 +53,8 @@ from typing import Callable
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from helpers.interrupts import interrupt_cli  # noqa: E402  (tests/helpers: process-group signals, servers)
 from helpers.gltf import gltf_with_texture_uri  # noqa: E402
+from helpers.interrupts import interrupt_cli  # noqa: E402  (tests/helpers: process-group signals, servers)
 from helpers.loopback import LoopbackServer  # noqa: E402
 from helpers.obj_files import latin1_room  # noqa: E402
 

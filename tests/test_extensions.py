@@ -17,14 +17,13 @@ import pytest
 
 from markerplace.cli.main import main
 from markerplace.localization.localizer import LOCALIZERS, LocalizationResult, Localizer, LocalizerSettings
-from markerplace.plan.place.methods import (PLACEMENT_METHODS, CalibratedMethod, CalibrationConfig, Choice,
-                                           PlacementMethod)
 from markerplace.plan.place.greedy import apply_coverages
+from markerplace.plan.place.methods import PLACEMENT_METHODS, CalibratedMethod, CalibrationConfig, Choice, PlacementMethod
 from markerplace.plan.score.marker_models import MARKER_MODELS, MarkerModel
 from markerplace.report.output_files import OUTPUT_FILES, OutputFile
 from markerplace.report.tagmaps.format import TAG_MAP_FORMATS, TagMapFormat
 from markerplace.settings import setting
-from markerplace.testbed.conditions import CONDITIONS, Condition
+from markerplace.simulation.conditions import CONDITIONS, Condition
 
 FAST = ["--grid-spacing", "2.0", "--yaws", "2", "--workers", "1", "--quiet"]
 

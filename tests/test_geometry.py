@@ -70,7 +70,10 @@ def test_invert_and_adjoint():
     # Ad(T) xi maps a right-perturbation to a left one: T Exp(xi) = Exp(Ad xi) T (first order)
     xi = rng.normal(size=6) * 1e-6
     def hat(x):
-        m = np.zeros((4, 4)); m[:3, :3] = g.skew(x[:3]); m[:3, 3] = x[3:]; return m
+        m = np.zeros((4, 4))
+        m[:3, :3] = g.skew(x[:3])
+        m[:3, 3] = x[3:]
+        return m
     lhs = T @ (np.eye(4) + hat(xi))
     rhs = (np.eye(4) + hat(g.adjoint(T) @ xi)) @ T
     assert np.allclose(lhs, rhs, atol=1e-12)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.util
 import subprocess
 import sys
+
 import pytest
 
 from helpers import REPO
@@ -92,6 +93,90 @@ def test_imports_at_module_level_except_heavy_optional_ones(layout):
     assert not found, "imports inside functions (move them to module level): " + "; ".join(
         f"{m}:{line}: {mod}" for m, line, mod in found[:20])
     assert all(name.split(".")[0] != "markerplace" for name in layout.HEAVY_OPTIONAL)
+
+
+def test_one_file_name_per_meaning(layout):
+    """No two modules share a file name (``check.py`` three times meant three things), except the
+    documented ``SHARED_NAMES``, each the same kind of module in every package that has one."""
+    found = layout.repeated_names()
+    assert not found, "modules sharing a file name (rename one, or document the name in SHARED_NAMES): " + "; ".join(
+        f"{name}.py: {', '.join(paths)}" for name, paths in found.items())
+    assert all(reason.strip() for reason in layout.SHARED_NAMES.values())
+
+
+def test_the_checker_finds_a_repeated_module_name(tmp_path, layout):
+    pkg = tmp_path / "markerplace"
+    for sub in ("plan", "cli"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+        (pkg / sub / "config.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "plan" / "check.py").write_text("")
+    assert layout.repeated_names(pkg) == {}  # __init__ and config repeat by design
+    (pkg / "cli" / "check.py").write_text("")
+    assert layout.repeated_names(pkg) == {"check": ["markerplace/cli/check.py", "markerplace/plan/check.py"]}
+    out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)
+    assert out.returncode == 1 and "check.py: markerplace/cli/check.py, markerplace/plan/check.py" in out.stdout
+
+
+def test_the_planner_imports_nothing_of_the_testbed(layout):
+    """``plan/``, ``pipelines/plan.py`` and ``pipelines/plan_frames.py`` (and all they import)
+    never reach ``testbed/``: what plan and evaluate share is in ``simulation/``."""
+    found = layout.planner_testbed_imports()
+    assert not found, "a plan imports the testbed: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def test_the_checker_finds_a_planner_import_of_the_testbed(tmp_path, layout):
+    pkg = tmp_path / "markerplace"
+    for sub in ("plan", "pipelines", "simulation", "testbed"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "simulation" / "fit.py").write_text("x = 1\n")
+    (pkg / "testbed" / "ceiling.py").write_text("from markerplace.simulation.fit import x\n")
+    (pkg / "pipelines" / "evaluate.py").write_text("from markerplace.testbed import ceiling\n")
+    (pkg / "pipelines" / "plan.py").write_text("from markerplace.simulation.fit import x\n")
+    assert layout.planner_testbed_imports(pkg) == []  # evaluate may use the testbed, a plan the simulation
+    (pkg / "simulation" / "fit.py").write_text("def f():\n    from markerplace.testbed.ceiling import y\n")
+    found = layout.planner_testbed_imports(pkg)  # (the testbed's __init__ runs too: reached as well)
+    assert ["markerplace.pipelines.plan", "markerplace.simulation.fit", "markerplace.testbed.ceiling"] in found
+    out = subprocess.run([sys.executable, str(SCRIPT), "--root", str(pkg)], capture_output=True, text=True)
+    assert out.returncode == 1
+    assert "markerplace.pipelines.plan -> markerplace.simulation.fit -> markerplace.testbed.ceiling" in out.stdout
+    (pkg / "simulation" / "fit.py").write_text("x = 1\n")
+    (pkg / "plan" / "stage.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                                           "    from markerplace.testbed import ceiling\n")
+    assert ["markerplace.plan.stage", "markerplace.testbed.ceiling"] in layout.planner_testbed_imports(pkg)
+
+
+def _documented_untested() -> dict[str, str]:
+    text = (REPO / "docs" / "contributing.md").read_text(encoding="utf-8")
+    section = text.split("### Modules no unit test imports", 1)[1].split("\n#", 1)[0]
+    rows = [line.split("|") for line in section.splitlines() if line.startswith("| `")]
+    return {row[1].strip().strip("`"): row[2].strip() for row in rows}
+
+
+def test_every_module_is_imported_by_a_test_or_listed_with_its_reason(layout):
+    listed = _documented_untested()
+    found = set(layout.untested_modules())
+    assert listed and all(listed.values())
+    missing = sorted(found - set(listed))
+    assert not missing, ("modules no test file imports: add a unit test, or list each with its reason in "
+                         f"docs/contributing.md (Modules no unit test imports): {missing}")
+    stale = sorted(set(listed) - found)
+    assert not stale, f"listed in docs/contributing.md as imported by no test, but a test imports them (or gone): {stale}"
+
+
+def test_the_checker_finds_a_module_no_test_imports(tmp_path, layout):
+    pkg, tests = tmp_path / "markerplace", tmp_path / "tests"
+    (pkg / "sub").mkdir(parents=True)
+    tests.mkdir()
+    for name in ("__init__.py", "a.py", "b.py", "c.py", "sub/__init__.py", "sub/d.py"):
+        (pkg / name).write_text("")
+    (tests / "test_x.py").write_text("import markerplace.a\nfrom markerplace.sub import d\n"
+                                     "TARGET = 'markerplace.c'\n")
+    (tests / "helper.py").write_text("from markerplace import b\n")  # not a test file
+    assert layout.untested_modules(pkg, tests) == ["b.py"]
 
 
 def test_no_module_over_the_limit(layout):

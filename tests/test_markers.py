@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from markerplace.runtime import cache
 from markerplace.errors import UserError
 from markerplace.markers import load_markers
+from markerplace.runtime import cache
 
 
 def test_marker_file_round_trip(tmp_path):

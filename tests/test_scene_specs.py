@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import tomllib
-
 import pytest
+import tomllib
 
 from markerplace.scene.builtin import campus, house
 from markerplace.scene.builtin.catalogue import builtin_names, get_layout, spec_of

@@ -11,10 +11,10 @@ import pytest
 
 from markerplace.cli.main import build_parser, main
 from markerplace.cli.options import plan_config_from_args
-from markerplace.plan.config import PlanConfig
 from markerplace.cli.run_options import RUN_OPTIONS
-from markerplace.settings import NO_FLAG, NO_FLAG_SECTIONS, flagged, walk
 from markerplace.pipelines.study import StudyPlan
+from markerplace.plan.config import PlanConfig
+from markerplace.settings import NO_FLAG, NO_FLAG_SECTIONS, flagged, walk
 from markerplace.testbed.config import EvaluateConfig
 
 ROOT = Path(__file__).resolve().parents[1]

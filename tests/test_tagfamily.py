@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.official_tags import OFFICIAL_IDS, official_png
 from markerplace.geometry import Intrinsics, world_from_marker_pose
 from markerplace.localization.tags import make_detector
 from markerplace.markers import Marker
 from markerplace.render.renderer import Renderer
-from markerplace.tagfamily import NUM_TAGS, QUIET_BITS, TAG_BITS, tag_image
 from markerplace.scene.types import MeshPart, Scene
-from helpers.official_tags import OFFICIAL_IDS, official_png
+from markerplace.tagfamily import NUM_TAGS, QUIET_BITS, TAG_BITS, tag_image
 
 UP = np.array([0.0, 0.0, 1.0])
 

@@ -29,15 +29,16 @@ import argparse
 import difflib
 import logging
 import math
-import tomllib
 from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
+import tomllib
+
 from markerplace.errors import UserError
-from markerplace.settings import NO_CONST, Leaf, apply, walk
 from markerplace.jsonfile import MAX_JSON_DEPTH, read_json
 from markerplace.runtime.run_lock import odd_entry
+from markerplace.settings import NO_CONST, Leaf, apply, walk
 
 log = logging.getLogger(__name__)
 

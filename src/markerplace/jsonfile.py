@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.input_checks import check_input_file
+from markerplace.input_paths import check_input_file
 
 __all__ = ["read_json", "json_depth", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
 

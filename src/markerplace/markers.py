@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.runtime.atomic_io import clean_array
 from markerplace.geometry import marker_corners_local, transform_points, world_from_marker_pose
 from markerplace.jsonfile import read_json
+from markerplace.runtime.atomic_io import clean_array
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.worldframe import points_to_user, world_offset
 from markerplace.tagfamily import NUM_TAGS

@@ -21,6 +21,7 @@ Registration order is the order of every listing (help, tables).
 from __future__ import annotations
 
 import dataclasses
+
 from markerplace.errors import UserError
 
 

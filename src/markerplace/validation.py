@@ -14,21 +14,20 @@ special options (``--pose``, ``--start``, ``--k``, ``--level``); :func:`check_po
 :func:`check_render_sees_something` refuse a ``render`` pose outside the model or seeing nothing
 of it. Lengths are metres, angles degrees.
 
-The other up-front checks: output paths in :mod:`markerplace.output_checks`, the run-size guard
+The other up-front checks: output paths in :mod:`markerplace.output_paths`, the run-size guard
 in :mod:`markerplace.pipelines.size_guard`.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
-from typing import Any, Sequence
+from typing import Sequence
+
+import numpy as np
 
 from markerplace.errors import UserError
-
-from markerplace.settings import OCCUPANCY_CELL, SEED_MAX, Bound  # noqa: F401 (re-exported)
-import argparse
-import numpy as np
-from markerplace.settings import check_bounds
+from markerplace.settings import SEED_MAX, Bound, check_bounds
 
 UNIT_SCALE = Bound("--unit-scale", 1e-6, 1e6, "", "the size of one file unit in metres, e.g. 0.01 for cm")
 SEED = Bound("--seed", 0, SEED_MAX, "", f"a seed in 0..{SEED_MAX}, e.g. 0", integer=True)

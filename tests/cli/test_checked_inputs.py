@@ -313,7 +313,6 @@ def test_files_outside_the_model_folder_are_named_without_trimesh_api(tmp_path, 
     import logging
 
     from helpers.gltf import gltf_with_texture_uri
-
     from markerplace.scene import load_scene
 
     (tmp_path / "outside.png").write_bytes(b"\x89PNG")

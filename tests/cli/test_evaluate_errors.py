@@ -20,11 +20,11 @@ def test_evaluate_bad_settings(args, message, tmp_path, capsys):
 def test_test_seed_defaults_to_seed_and_overrides_it():
     import argparse
 
-    from markerplace.cli.evaluate import add_evaluate_parser, evaluate_config_from_args
+    from markerplace.cli.evaluate_command import add_evaluate_parser, evaluate_config_from_args
 
     parser = argparse.ArgumentParser()
     add_evaluate_parser(parser.add_subparsers(dest="command"))
-    from markerplace.testbed.map_setup import localizer_spec
+    from markerplace.simulation.map_setup import localizer_spec
 
     base = ["evaluate", "tiny", "--out", "x", "--seed", "7"]
     assert evaluate_config_from_args(parser.parse_args(base)).pose_seed == 7

@@ -19,8 +19,8 @@ try:
 except ImportError:  # a version without it: its tests must fail, the CLI tests still run
     validation = None
 from markerplace.cli import bounds
-from markerplace.pipelines import size_guard
 from markerplace.errors import UserError
+from markerplace.pipelines import size_guard
 
 
 def _one_line_error(capsys, *needles):
@@ -206,12 +206,12 @@ def _numeric_options(parser: argparse.ArgumentParser, prefix: str = ""):
 
 def test_every_numeric_option_has_a_bound():
     missing = [(cmd, dest) for cmd, dest in _numeric_options(build_parser())
-               if dest not in bounds.BOUNDS.get(cmd, {})]
-    assert not missing, f"numeric options without a bound in markerplace.cli.bounds.BOUNDS: {missing}"
+               if dest not in bounds.option_bounds().get(cmd, {})]
+    assert not missing, f"numeric options without a bound in markerplace.cli.bounds.option_bounds(): {missing}"
 
 
 def test_bound_messages_name_option_value_range_and_unit():
-    b = bounds.GRID_SPACING
+    b = bounds.field_bound("plan", "discretize.grid_spacing")
     for value, needle in [(float("nan"), "not a finite number"), (-1.0, "-1 m is outside [0.05, 50] m"),
                           (1e300, "1e+300 m is outside"), ("x", "is not a number")]:
         with pytest.raises(UserError, match="--grid-spacing") as info:
@@ -259,11 +259,10 @@ def test_size_guard_counts_the_poses_when_the_bounding_box_overstates_them(tmp_p
 
 def test_size_guard_estimate_bounds_the_real_pose_count(tmp_path):
     import json
-
     from dataclasses import replace
 
-    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.scene import load_scene
 
     out = tmp_path / "p"
@@ -298,8 +297,8 @@ def test_force_flag_is_accepted_by_plan_and_evaluate():
 def test_size_guard_counts_storeys_of_level_all():
     from dataclasses import replace
 
-    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.scene import load_scene
 
     house = load_scene("house")  # two storeys
@@ -316,9 +315,8 @@ def test_measured_estimate_times_the_scene_and_refuses_a_run_too_long(monkeypatc
     import logging
 
     from markerplace.pipelines import size_guard
-    from markerplace.plan.discretize.stage import discretize
     from markerplace.plan.config import PlanConfig
-    from markerplace.scene import load_scene
+    from markerplace.plan.discretize.stage import discretize
     from markerplace.scene.spec import SceneSpec
 
     spec = SceneSpec("tiny", None, None, 0)

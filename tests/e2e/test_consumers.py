@@ -24,11 +24,11 @@ import numpy as np
 import pytest
 
 from helpers import consumers as C
+from helpers.official_tags import official_square
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.report.tagmaps.write import write_tag_maps
 from markerplace.scene.loader import up_rotation
-from helpers.official_tags import official_square
 
 W, H = 1600, 1200
 K = np.array([[1100.0, 0.0, 799.5], [0.0, 1100.0, 599.5], [0.0, 0.0, 1.0]])

@@ -8,9 +8,8 @@ import json
 
 import pytest
 
-from markerplace.cli.main import main
-
 from helpers.hostile_meshes import CORPUS
+from markerplace.cli.main import main
 
 FAST = ["-k", "2", "--yaws", "2", "--grid-spacing", "1.0", "--workers", "1"]
 

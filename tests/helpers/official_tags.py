@@ -3,7 +3,6 @@ outside reference the tag tests compare with; never markerplace's own drawing.""
 
 from __future__ import annotations
 
-
 import numpy as np
 from PIL import Image
 

@@ -5,7 +5,8 @@ from dataclasses import replace
 import pytest
 
 from markerplace.geometry import Intrinsics
-from markerplace.imaging.config import SIFT_DEFAULT, SIFT_SCORING, ImagingConfig, renders_alike
+from markerplace.imaging.config import ImagingConfig, renders_alike
+from markerplace.localization.sift import SIFT_DEFAULT, SIFT_SCORING
 
 
 def test_a_different_feature_preset_still_renders_alike():

@@ -11,8 +11,7 @@ import pytest
 from markerplace.geometry import Intrinsics, project, world_from_cam_poses
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import ImageFeatures
-from markerplace.imaging.location_views import (crop, face_layout, location_groups, split_features,
-                                                 unoccluded_from_faces, warp_view)
+from markerplace.imaging.location_views import crop, face_layout, location_groups, split_features, unoccluded_from_faces, warp_view
 from markerplace.imaging.visibility import marker_points, markers_unoccluded
 from markerplace.render.renderer import Renderer
 from markerplace.scene import load_scene

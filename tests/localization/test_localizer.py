@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from skimage import data
 
+from helpers.official_tags import official_square
 from markerplace.geometry import Intrinsics, invert, so3_exp, world_from_cam_pose, world_from_marker_pose
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
-from markerplace.localization.features import SIFT_DEFAULT
 from markerplace.localization.localizer import LocalizerConfig, SiftPnP
 from markerplace.localization.pnp import pose_errors
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
-from helpers.official_tags import official_square
 
 INTR = Intrinsics()
 K = INTR.K

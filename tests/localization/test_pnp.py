@@ -6,11 +6,11 @@ import cv2
 import numpy as np
 import pytest
 
+from helpers.official_tags import official_square
 from markerplace.geometry import Intrinsics, invert, project, so3_exp, world_from_cam_pose, world_from_marker_pose
 from markerplace.localization.pnp import PnPConfig, estimate_pose, pose_errors
 from markerplace.localization.tags import TagDetection, detect_tags, pose_from_tag
 from markerplace.markers import Marker
-from helpers.official_tags import official_square
 
 INTR = Intrinsics()
 K = INTR.K

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.geometry import Intrinsics, rotation_angle_deg
 from markerplace.localization.database import MapDatabase, map_image_from_rgbd
 from markerplace.localization.localizer import LocalizerConfig, SiftPnP
 from markerplace.localization.pnp import pose_errors
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
+from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.render.renderer import Renderer
 from markerplace.scene import load_scene
 

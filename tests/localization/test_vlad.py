@@ -7,7 +7,7 @@ import pytest
 from skimage import data
 
 from markerplace.geometry import Intrinsics, world_from_cam_pose
-from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, extract_sift, lift_to_3d
+from markerplace.localization.sift import SIFT_DEFAULT, SIFT_SCORING, extract_sift, lift_to_3d
 from markerplace.localization.vlad import VladCodebook, kmeans, nearest, root_sift
 
 

@@ -8,17 +8,18 @@ import pytest
 
 from helpers import undeclared_outputs
 from markerplace.geometry import Intrinsics, world_from_cam_pose, world_from_marker_pose
-from markerplace.imaging.config import SIFT_DEFAULT, ImagingConfig
+from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
 from markerplace.imaging.visibility import marker_points, markers_in_view
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.markers import Marker
 from markerplace.pipelines.evaluate import EVALUATE_OUTPUTS
 from markerplace.runtime.executor import InProcessExecutor
 from markerplace.scene.types import MeshPart, Scene
-from markerplace.testbed import marker_sets as placements
-from markerplace.testbed import poses as tposes
+from markerplace.simulation import marker_sets as placements
+from markerplace.simulation import pose_sampling as tposes
+from markerplace.simulation.rendered_images import TestbedImaging
 from markerplace.testbed import config as tbconfig
-from markerplace.testbed.images import TestbedImaging
 
 
 def _box_scene(size=4.0, height=2.7):
@@ -279,11 +280,11 @@ def test_reusing_unchanged_queries_changes_no_result(tmp_path):
     from dataclasses import replace
 
     from markerplace.geometry import world_from_marker_pose
-    from markerplace.plan.discretize.stage import DiscretizeConfig
+    from markerplace.pipelines.evaluate import run_evaluation
     from markerplace.plan.config import PlanConfig
+    from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.pipelines.evaluate import run_evaluation
 
     outside = Marker(30, 0.4, world_from_marker_pose(np.array([-0.15, 1.7, 1.5]), np.array([-1.0, 0.0, 0.0])))
     (tmp_path / "extra" / "outside").mkdir(parents=True)

@@ -56,12 +56,12 @@ def test_composited_tags_are_found_by_the_detector_where_they_are_in_view(evalua
     no tag is found that was not put in."""
     from markerplace.geometry import project
     from markerplace.imaging.config import ImagingConfig
-    from markerplace.localization.features import SIFT_DEFAULT
+    from markerplace.localization.sift import SIFT_DEFAULT
     from markerplace.localization.tags import detect_tags
     from markerplace.markers import marker_from_json
     from markerplace.scan.frames import open_frameset
     from markerplace.testbed.frames.config import FramesEvalConfig
-    from markerplace.testbed.frames.images import FrameJobSpec, FrameWorker, frame_in_view, real_image
+    from markerplace.testbed.frames.frame_features import FrameJobSpec, FrameWorker, frame_in_view, real_image
 
     markers = {}
     for path in (evaluated / "cache" / "maps").glob("*/markers.json"):

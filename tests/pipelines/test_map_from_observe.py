@@ -9,7 +9,6 @@ from __future__ import annotations
 import csv
 
 import numpy as np
-import pytest
 
 from helpers import FAST_2_YAWS
 from markerplace.cli.main import main

@@ -99,11 +99,11 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     no method can place a tag nobody sees."""
     from dataclasses import replace
 
+    from markerplace.pipelines.plan import prepare
+    from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.stage import DiscretizeConfig
     from markerplace.runtime.executor import RuntimeConfig
     from markerplace.scene.spec import SceneSpec
-    from markerplace.pipelines.plan import prepare
-    from markerplace.plan.config import PlanConfig
 
     config = PlanConfig(discretize=replace(DiscretizeConfig(), grid_spacing=1.0, num_yaws=2),
                         runtime=RuntimeConfig(workers=1))
@@ -113,7 +113,7 @@ def test_every_candidate_offered_is_seen_by_some_pose(tmp_path):
     assert all(len(cov.pose_idx) > 0 for cov in data.coverages[:C])
     removed = data.disc.summary["candidates_removed"]
     assert removed["not seen"] >= 1  # with 2 yaws on a 1 m grid some walls face no camera
-    from markerplace.plan.discretize.wall_candidates import RULES
+    from markerplace.plan.discretize.candidate_rules import RULES
 
     assert set(removed) == {*RULES, "not seen"}
     assert removed["furniture"] >= 1 and removed["pictures"] >= 1  # tiny's bookshelf, cabinet and picture

@@ -65,7 +65,6 @@ def test_observed_points_lie_on_the_true_surface(prepared, tiny):
 def test_unoccluded_agrees_with_a_render_of_the_same_tags(prepared, tiny):
     fs, run, data = prepared
     from markerplace.imaging.features import FeatureSet
-
     from markerplace.plan.discretize.artifact import load
 
     obs = FeatureSet.load(run / "observations").extras["candidate_unoccluded"]
@@ -162,7 +161,7 @@ def test_a_7scenes_copy_of_the_frames_plans_the_same_spots(prepared, tiny, tmp_p
     plan as the project's own layout does."""
     from helpers.frame_layouts import write_7scenes
     from markerplace.geometry import invert
-    from markerplace.scan.frames import load_frame
+    from markerplace.scan.frame_images import load_frame
 
     fs, _, data = prepared
     c, s_ = np.cos(np.radians(100.0)), np.sin(np.radians(100.0))

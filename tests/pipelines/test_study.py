@@ -39,19 +39,18 @@ def test_study_tiny_writes_every_group_with_paired_differences(tmp_path, capsys)
 def test_default_budgets_of_study_and_evaluate_build_a_valid_plan_config(tmp_path):
     """`--k` of study/evaluate is a list that shares plan's `k`: the default list must plan
     max(ks) markers (the README's `markerplace study office --out out/study` once failed here)."""
+    from markerplace.cli.bounds import field_bound
+    from markerplace.cli.evaluate_command import evaluate_config_from_args
     from markerplace.cli.main import build_parser
     from markerplace.cli.options import plan_config_for_budgets
     from markerplace.plan.config import validate
-    from markerplace.cli.bounds import EVAL_K
     from markerplace.validation import parse_int_list
-
-    from markerplace.cli.evaluate import evaluate_config_from_args
 
     for command in ("study", "evaluate"):
         args = build_parser().parse_args([command, "tiny", "--out", str(tmp_path / command)])
         # (evaluate's --k has no argparse default, so that --plan knows whether it was given; the
         # field's default applies)
-        ks = parse_int_list(args.k, "--k", EVAL_K) if command == "study" else evaluate_config_from_args(args).study.ks
+        ks = parse_int_list(args.k, "--k", field_bound("evaluate", "study.ks")) if command == "study" else evaluate_config_from_args(args).study.ks
         assert ks == (5, 10, 15, 20)
         config = plan_config_for_budgets(args, ks)
         validate(config)
@@ -75,8 +74,8 @@ def test_study_runs_leave_the_diagnostics_out_and_are_checked_first():
     import pytest
 
     from markerplace.errors import UserError
-    from markerplace.testbed.config import DiagnosticsConfig, EvaluateConfig
     from markerplace.pipelines.study import StudyPlan, study_runs
+    from markerplace.testbed.config import DiagnosticsConfig, EvaluateConfig
 
     config = EvaluateConfig(diagnostics=DiagnosticsConfig(ceiling=True, calibration=True))
     runs = study_runs(config, StudyPlan(shifts=(0.25,), scales=(0.5,)))

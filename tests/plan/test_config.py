@@ -1,9 +1,9 @@
 """Settings with one home: the tag size lives in PlacementConfig alone; the discretization gets it
 as an argument (and in its cache key), and its candidate settings are a nested CandidateConfig."""
 
+from markerplace.plan.config import PlanConfig
 from markerplace.plan.discretize.candidate_rules import CandidateConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
-from markerplace.plan.config import PlanConfig
 from markerplace.plan.place.config import PlacementConfig
 from markerplace.settings import walk
 

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.poses import look_at_pose
 from markerplace.geometry import Intrinsics, invert, project
 from markerplace.render.culling import MIN_TRIANGLES, chunk_triangles, frustum_planes, visible_ranges
 from markerplace.render.gl_resources import FAR, NEAR
 from markerplace.render.renderer import Renderer
 from markerplace.scene.types import MeshPart, Scene
-from helpers.poses import look_at_pose
 
 ROOM = (6.0, 5.0, 2.7)
 CELLS = 80  # per face side: 6 faces x 2 x 80^2 = 76,800 triangles, more than MIN_TRIANGLES

@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 
 from helpers.atlas_scenes import PALETTE, foreign_colours, multi_atlas_room
+from helpers.poses import look_at_pose
 from markerplace.geometry import Intrinsics, world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.render.culling import MIN_TRIANGLES
 from markerplace.render.renderer import Renderer
-from helpers.poses import look_at_pose
 
 K = Intrinsics.from_fov(200, 150, 75.0)
 

@@ -9,10 +9,10 @@ import pytest
 from markerplace.geometry import Intrinsics, invert, project, transform_points, world_from_cam_pose, world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.render.gl_resources import projection_matrix
-from markerplace.render.renderer import RenderResult, Renderer
-from markerplace.tagfamily import outer_size
+from markerplace.render.renderer import Renderer, RenderResult
 from markerplace.render.views import default_pose, write_render_outputs
 from markerplace.scene.types import MeshPart, Room, Scene
+from markerplace.tagfamily import outer_size
 
 K = Intrinsics().K
 CAM = world_from_cam_pose(np.array([0.0, 0.0, 1.5]), 0.0)  # looks along +x

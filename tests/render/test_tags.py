@@ -7,12 +7,12 @@ import pytest
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, project, world_from_cam_pose, world_from_marker_pose
+from markerplace.localization.tags import make_detector
 from markerplace.markers import Marker
 from markerplace.render import gl_resources
 from markerplace.render.renderer import Renderer
-from markerplace.localization.tags import make_detector
-from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
 from markerplace.scene.types import MeshPart, Scene
+from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
 
 K = Intrinsics().K
 

@@ -14,12 +14,11 @@ from helpers import FAST_2_YAWS as FAST
 from helpers.browser import check_page, click_tag, view_call
 from markerplace.cli.main import main
 from markerplace.report.captions import describe_tag, facing_label, wall_side
-from markerplace.testbed.reporting.page import gallery_selection
 from markerplace.report.html import markdown_to_html
 from markerplace.report.installer import standing_distance
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene
-
+from markerplace.testbed.reporting.page import gallery_selection
 
 # ---------------------------------------------------------------- hand-built rooms
 

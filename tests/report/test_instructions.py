@@ -15,7 +15,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from helpers import FAST_2_YAWS as FAST, negative_zeros
+from helpers import FAST_2_YAWS as FAST
+from helpers import negative_zeros
 from markerplace.report.captions import describe_tag
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene
@@ -80,8 +81,8 @@ def test_door_edge_and_outside_corner(caster):
 def test_install_object_hangs_the_tag_where_it_was_measured(caster):
     """Follow an install object literally: from the named reference, the distance along the wall,
     at the height above the floor: the tag centre it names is the measured one."""
-    from markerplace.markers import Marker
     from markerplace.geometry import world_from_marker_pose
+    from markerplace.markers import Marker
     from markerplace.report.instructions import install_instructions
 
     scene = furnished_room()

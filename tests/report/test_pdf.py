@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from markerplace.errors import UserError
-from markerplace.tagfamily import outer_size
-from markerplace.report.pdf import write_tags_pdf
-from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout
-from markerplace.report.printable import caption_for
 from helpers import printed_tags
+from markerplace.errors import UserError
+from markerplace.report.pdf import write_tags_pdf
+from markerplace.report.printable import caption_for
+from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, caption_block_mm, tile_layout
+from markerplace.tagfamily import outer_size
 
 DPI = 300
 PX_PER_MM = DPI / 25.4

@@ -8,8 +8,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from markerplace.tagfamily import outer_size
 from markerplace.report.printable import caption_for, tag_modules, tag_svg, write_tag_sheets
+from markerplace.tagfamily import outer_size
 
 NS = "{http://www.w3.org/2000/svg}"
 

@@ -15,9 +15,9 @@ import trimesh
 
 from helpers import FAST
 from markerplace.cli.main import main
-from markerplace.tagfamily import outer_size
-from markerplace.scene.export import GLTF_FROM_WORLD
 from markerplace.report.tagged_export import TAG_LIFT_M
+from markerplace.scene.export import GLTF_FROM_WORLD
+from markerplace.tagfamily import outer_size
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +27,7 @@ def tiny_plan(run_plan):
 
 def pdf_pages(path) -> int:
     text = subprocess.run(["pdfinfo", str(path)], check=True, capture_output=True, text=True).stdout
-    return int(next(l.split()[1] for l in text.splitlines() if l.startswith("Pages:")))
+    return int(next(line.split()[1] for line in text.splitlines() if line.startswith("Pages:")))
 
 
 def tag_nodes(glb):
@@ -68,8 +68,8 @@ def test_plan_writes_pdf_and_tag_maps(tiny_plan, tmp_path):
 
 
 def test_deliverables_of_a_gltf_scene_have_y_up_maps(tmp_path):
-    from markerplace.markers import Marker
     from markerplace.geometry import world_from_marker_pose
+    from markerplace.markers import Marker
     from markerplace.report.deliverables import write_deliverables
 
     m = Marker(4, 0.1, world_from_marker_pose(np.array([1.0, 2.0, 1.5]), np.array([0.0, -1.0, 0.0])))

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from helpers import FAST
-from markerplace.runtime import cache
 from markerplace.cli.main import main
+from markerplace.runtime import cache
 
 
 def test_mark_done_records_size_and_checksum(tmp_path):

@@ -14,9 +14,11 @@ import pytest
 
 from helpers import FAST
 from markerplace.cli.main import main
+from markerplace.errors import UserError
 from markerplace.pipelines.check import CHECK_OUTPUTS
 from markerplace.pipelines.plan import PLAN_OUTPUTS
 from markerplace.runtime import run_folder
+from markerplace.runtime.claims import refuse_foreign
 
 
 def _snapshot(folder: Path) -> dict:
@@ -72,3 +74,39 @@ def test_evaluate_and_study_refuse_a_foreign_output_in_their_adopted_out_before_
     assert err.startswith("markerplace: error: ") and err.count("\n") == 1 and name in err, err
     assert "checked before any work" in err and seconds < 5.0
     assert _snapshot(out) == before
+
+
+# refuse_foreign on its own: in an adopted folder, an entry named like an output that markerplace did
+# not write is refused (one line); its own files, other names and folders outside a run folder pass.
+
+@pytest.fixture
+def adopted(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "placement.json").write_text("the user's own")
+    (out / "observations").write_text("a file where the run makes a folder")
+    (out / "notes.txt").write_text("mine")
+    folder = run_folder.open_run_folder(out, "plan", adopt=True)
+    yield out, folder
+    run_folder.close_all()
+
+
+def test_a_foreign_output_is_refused_and_other_names_pass(adopted):
+    out, _ = adopted
+    refuse_foreign(out, ["scores.npz", "tags/*_tag*.svg", "*.csv"])  # nothing of the user's matches
+    with pytest.raises(UserError) as info:
+        refuse_foreign(out, ["placement.json"])
+    message = str(info.value)
+    assert "placement.json is not written by markerplace" in message and "checked before any work" in message
+    assert "\n" not in message
+    with pytest.raises(UserError, match="observations is a file where markerplace makes a folder"):
+        refuse_foreign(out, ["observations/"])
+
+
+def test_files_markerplace_wrote_and_paths_outside_a_run_folder_pass(adopted, tmp_path):
+    out, _ = adopted
+    run_folder.prepare_write(out / "scores.npz").write_bytes(b"ours")
+    refuse_foreign(out, ["scores.npz"])
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "placement.json").write_text("not a run folder")
+    refuse_foreign(tmp_path / "elsewhere", ["placement.json"])

@@ -10,7 +10,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -284,8 +283,8 @@ def test_similarity_is_recomputed_when_the_observations_change(copy_of):
 
 
 def test_a_stage_with_upstream_artifacts_reruns_when_they_change(tmp_path):
-    from markerplace.runtime.atomic_io import write_json
     from markerplace.runtime import cache
+    from markerplace.runtime.atomic_io import write_json
     from markerplace.runtime.stages import cached
 
     upstream, out = tmp_path / "map.json", tmp_path / "model.json"

@@ -15,10 +15,10 @@ from PIL import Image
 from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics, project
 from markerplace.scan.frames import FrameWriter, load_frame, open_frameset
-from markerplace.scan.fuse import read_ahead
 from markerplace.scan.frameset import rotation_from_quaternion
-from markerplace.scan.tum import associate, nearest, read_tum
+from markerplace.scan.fuse import read_ahead
 from markerplace.scan.simulate import distance_to_scene
+from markerplace.scan.tum import associate, nearest, read_tum
 from markerplace.scan.walk import world_from_cam_ypr
 from markerplace.scene import load_scene
 

@@ -15,7 +15,8 @@ from PIL import Image
 from helpers.frame_layouts import write_7scenes, write_nerfstudio, write_stray, write_tum
 from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics, invert
-from markerplace.scan.frames import FrameWriter, detect_format, load_frame, open_frameset
+from markerplace.scan.frame_images import load_frame
+from markerplace.scan.frames import FrameWriter, detect_format, open_frameset
 from markerplace.scan.frameset import frame_intrinsics
 from markerplace.scan.fuse import FuseConfig, fuse_frameset, refine_up
 from markerplace.scan.simulate import distance_to_scene

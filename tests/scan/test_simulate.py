@@ -11,12 +11,14 @@ import pytest
 
 from markerplace.cli.main import main
 from markerplace.geometry import world_from_cam_pose
-from markerplace.scene.raycast import RayCaster
-from markerplace.scan.frames import open_frameset, load_frame
 from markerplace.scan.depth_noise import DepthNoiseConfig, noisy_depth
+from markerplace.scan.frame_images import load_frame
+from markerplace.scan.frames import open_frameset
 from markerplace.scan.simulate import FrameSimulator, ScanConfig, distance_to_scene
 from markerplace.scan.walk import WalkConfig, find_doorways, plan_walk, world_from_cam_ypr
-from markerplace.scene import MeshPart, Room, Scene, load_scene
+from markerplace.scene import load_scene
+from markerplace.scene.raycast import RayCaster
+from markerplace.scene.types import MeshPart, Room, Scene
 
 
 def _one_line_error(capsys, fragment: str) -> None:

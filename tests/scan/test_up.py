@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.scan.up import (angle_deg, estimate_up_from_cameras, estimate_up_from_mesh, parse_up, rotation_to_z_up,
-                                 world_from_input)
+from markerplace.scan.up import angle_deg, estimate_up_from_cameras, estimate_up_from_mesh, parse_up, rotation_to_z_up, world_from_input
 from markerplace.scan.walk import world_from_cam_ypr
 
 
@@ -50,7 +49,7 @@ def test_camera_estimate_and_spread(caplog):
     rng = np.random.default_rng(3)
     tilt = rotation_to_z_up(np.array([0.1, -0.2, 1.0])).T  # the input world's up is tilt @ z
     poses = []
-    for k in range(24):
+    for _ in range(24):
         T = world_from_cam_ypr(np.zeros(3), rng.uniform(0, 2 * np.pi), math.radians(rng.uniform(-30, 30)),
                                math.radians(rng.normal(0, 3)))
         T[:3, :3] = tilt @ T[:3, :3]
@@ -88,8 +87,8 @@ def test_spread_over_30_deg_is_a_warning(tmp_path, caplog, monkeypatch):
 
     from PIL import Image
 
-    from markerplace.scan.frames import open_frameset
     from helpers.frame_layouts import opengl_pose
+    from markerplace.scan.frames import open_frameset
 
     frames = []
     for i, roll in enumerate((-60.0, 0.0, 60.0, 10.0)):
@@ -111,17 +110,22 @@ def _room_points(tilt_deg: float, rng):
     the floor normal tilted by ``tilt_deg`` about x, with 3 deg normal noise."""
     pts, nrm = [], []
     for _ in range(4000):  # floor
-        pts.append([rng.uniform(0, 4), rng.uniform(0, 4), 0.0]); nrm.append([0, 0, 1])
+        pts.append([rng.uniform(0, 4), rng.uniform(0, 4), 0.0])
+        nrm.append([0, 0, 1])
     for _ in range(800):  # table top
-        pts.append([rng.uniform(1, 2), rng.uniform(1, 2), 0.75]); nrm.append([0, 0, 1])
+        pts.append([rng.uniform(1, 2), rng.uniform(1, 2), 0.75])
+        nrm.append([0, 0, 1])
     for _ in range(1000):  # ceiling, normals down
-        pts.append([rng.uniform(0, 4), rng.uniform(0, 4), 2.5]); nrm.append([0, 0, -1])
+        pts.append([rng.uniform(0, 4), rng.uniform(0, 4), 2.5])
+        nrm.append([0, 0, -1])
     for k in range(4):  # walls
         for _ in range(2000):
             a = k * np.pi / 2
-            pts.append([rng.uniform(0, 4), rng.uniform(0, 4), rng.uniform(0, 2.5)]); nrm.append([np.cos(a), np.sin(a), 0])
+            pts.append([rng.uniform(0, 4), rng.uniform(0, 4), rng.uniform(0, 2.5)])
+            nrm.append([np.cos(a), np.sin(a), 0])
     for _ in range(600):  # a ramp at 20 deg: not a floor
-        pts.append([rng.uniform(0, 1), rng.uniform(0, 1), 0.2]); nrm.append([0, np.sin(0.35), np.cos(0.35)])
+        pts.append([rng.uniform(0, 1), rng.uniform(0, 1), 0.2])
+        nrm.append([0, np.sin(0.35), np.cos(0.35)])
     N = np.asarray(nrm, float) + rng.normal(0, math.radians(3), (len(nrm), 3))
     R = np.array([[1, 0, 0], [0, math.cos(math.radians(tilt_deg)), -math.sin(math.radians(tilt_deg))],
                   [0, math.sin(math.radians(tilt_deg)), math.cos(math.radians(tilt_deg))]])
@@ -144,12 +148,13 @@ def test_mesh_estimate_needs_upward_surfaces():
 
 
 def test_refine_up_only_refines_an_estimate_within_15_deg():
+    from pathlib import Path
+
     import open3d as o3d
 
     from markerplace.geometry import Intrinsics
     from markerplace.scan.frameset import FrameRecord, FrameSet
     from markerplace.scan.fuse import refine_up
-    from pathlib import Path
 
     def mesh_of(tilt):
         V, N, _ = _room_points(tilt, np.random.default_rng(2))

@@ -9,11 +9,11 @@ import logging
 import numpy as np
 import pytest
 
-from helpers.gltf import gltf_with_texture_uri
 from helpers import FAST
-from markerplace.runtime import cache
+from helpers.gltf import gltf_with_texture_uri
 from markerplace.cli.main import main
 from markerplace.errors import UserError
+from markerplace.runtime import cache
 from markerplace.scene import load_scene
 
 FAR = np.array([1.0e6, 2.0e6, 0.0])  # survey-like coordinates, world metres
@@ -301,8 +301,8 @@ def test_obj_missing_texture_is_named(meshes, tmp_path, caplog):
 
 @pytest.mark.parametrize("make", ["missing", "empty", "malformed"])
 def test_evaluate_checks_placements_before_any_work(make, tmp_path, capsys, monkeypatch):
-    import markerplace.pipelines.plan
     import markerplace.pipelines.evaluate
+    import markerplace.pipelines.plan
 
     monkeypatch.setattr(markerplace.pipelines.plan, "prepare", lambda *a, **k: pytest.fail("prepare ran"))
     monkeypatch.setattr(markerplace.pipelines.evaluate, "run_evaluation", lambda *a, **k: pytest.fail("evaluation ran"))

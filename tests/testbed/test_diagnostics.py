@@ -14,8 +14,8 @@ from markerplace.localization.database import MapDatabase
 from markerplace.localization.localizer import SiftPnP
 from markerplace.localization.vlad import VladCodebook
 from markerplace.markers import Marker
+from markerplace.simulation.success_fit import placement_candidates
 from markerplace.testbed.ceiling import oracle_order
-from markerplace.testbed.calibration import placement_candidates
 
 FAST = ["--grid-spacing", "1.0", "--yaws", "4", "--workers", "2", "--quiet"]
 
@@ -33,7 +33,7 @@ def _db(M: int = 12, seed: int = 0) -> MapDatabase:
 
 
 def test_retrieval_leaves_out_excluded_images_and_keeps_the_order_of_the_rest():
-    from markerplace.testbed.predict import Retrieval
+    from markerplace.simulation.placement_localization import Retrieval
 
     db = _db()
     loc = SiftPnP(db, np.eye(3), num_candidates=5)
@@ -295,7 +295,7 @@ def test_ceiling_holdout_refuses_a_run_whose_last_single_tag_runs_are_missing(ev
 
 
 def test_main_threshold_falls_back_to_the_first_when_the_papers_is_not_measured():
-    from markerplace.testbed.metrics import MAIN_THRESHOLD, THRESHOLDS, main_threshold
+    from markerplace.simulation.metrics import MAIN_THRESHOLD, THRESHOLDS, main_threshold
 
     assert main_threshold(THRESHOLDS) == MAIN_THRESHOLD
     assert main_threshold(((0.1, 10.0), (1.0, 30.0))) == (0.1, 10.0)

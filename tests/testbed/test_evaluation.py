@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from markerplace.testbed import metrics
-from markerplace.testbed import poses as tposes
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_cam_poses
+from markerplace.simulation import metrics
+from markerplace.simulation import pose_sampling as tposes
 from markerplace.testbed.reporting import tables
 
 

@@ -1,44 +1,46 @@
 """The bounds of every numeric command-line option, and :func:`check_args`, which applies them.
 
 The bounds of options that set a config field live on the field
-(:func:`markerplace.settings.setting`); this module gathers them per subcommand (:data:`BOUNDS`,
-built on first use) next to the hand-written ones of the other options
-(:mod:`markerplace.validation`), and gives the field bounds their old names (``GRID_SPACING``,
-``EVAL_K``, ...). :func:`check_args` is called once by :func:`markerplace.cli.main.main` for every
-subcommand: one-line :class:`~markerplace.errors.UserError`, exit code 2.
+(:func:`markerplace.settings.setting`); this module gathers them per subcommand
+(:func:`option_bounds`, built on first use) next to the hand-written ones of the other options
+(:mod:`markerplace.validation`); :func:`field_bound` gives one field's. :func:`check_args` is
+called once by :func:`markerplace.cli.main.main` for every subcommand: one-line :class:`~markerplace.errors.UserError`, exit code 2.
 """
 
 from __future__ import annotations
 
 from markerplace.errors import UserError
 from markerplace.pipelines.study import StudyPlan
-from markerplace.validation import (COORDINATE, DEPTH_MAX, EVERY, FRAME_STEP, HFOV, IMAGE_HEIGHT,
-                                    IMAGE_WIDTH, MATCH_RADIUS, MAX_DT, SEED, SPLIT_BLOCK, SPLIT_GAP, SPLIT_MAP_STEP,
-                                    SPLIT_QUERY_STEP, UNIT_SCALE, VOXEL, YAW_DEG, Bound, parse_floats, parse_int_list)
 from markerplace.plan.config import PlanConfig
 from markerplace.runtime.cluster import parse_cluster
 from markerplace.runtime.executor import RuntimeConfig
-from markerplace.settings import bounds_by_dest, walk
+from markerplace.settings import Bound, bounds_by_dest, walk
 from markerplace.testbed.config import EvaluateConfig
+from markerplace.validation import (
+    COORDINATE,
+    DEPTH_MAX,
+    EVERY,
+    FRAME_STEP,
+    HFOV,
+    IMAGE_HEIGHT,
+    IMAGE_WIDTH,
+    MATCH_RADIUS,
+    MAX_DT,
+    SEED,
+    SPLIT_BLOCK,
+    SPLIT_GAP,
+    SPLIT_MAP_STEP,
+    SPLIT_QUERY_STEP,
+    UNIT_SCALE,
+    VOXEL,
+    YAW_DEG,
+    parse_floats,
+    parse_int_list,
+)
 
-__all__ = ["BOUNDS", "check_args", "command_name", "field_bound"]
+__all__ = ["check_args", "command_name", "field_bound", "option_bounds"]
 
 _SCENE_OPTIONS = {"unit_scale": UNIT_SCALE, "seed": SEED}
-
-_FIELD_BOUNDS = {
-    "K": ("plan", "placement.k"), "V": ("plan", "placement.methods.omp.v"), "TAG_SIZE": ("plan", "placement.tag_size"),
-    "PLACEMENT_SEED": ("plan", "placement.seed"), "PLANE_HEIGHT": ("plan", "discretize.height"),
-    "LEVEL": ("plan", "discretize.level"), "GRID_SPACING": ("plan", "discretize.grid_spacing"),
-    "CLEARANCE": ("plan", "discretize.clearance"), "YAWS": ("plan", "discretize.num_yaws"),
-    "MARKER_SPACING": ("plan", "discretize.candidates.marker_spacing"), "WORKERS": ("plan", "runtime.workers"),
-    "CLUSTER_WAIT": ("plan", "runtime.cluster_wait"),
-    "TESTS": ("evaluate", "test.tests"), "RUNS": ("evaluate", "study.runs"), "EVAL_K": ("evaluate", "study.ks"),
-    "TAG_SCALE": ("evaluate", "study.tag_scale"), "SHIFT": ("evaluate", "study.shift"),
-    "TEST_SEED": ("evaluate", "test.seed"),
-}
-"""Bounds of config fields, by their old names here: each is built from its field's
-:func:`~markerplace.settings.setting` (the one home of the bound)."""
-
 
 def _configs() -> dict:
     """The root configs of ``plan`` and ``evaluate`` (defaults), imported when first needed."""
@@ -54,7 +56,7 @@ def field_bound(root: str, path: str) -> Bound:
 _BOUNDS: dict[str, dict[str, Bound]] = {}
 
 
-def _bounds() -> dict[str, dict[str, Bound]]:
+def option_bounds() -> dict[str, dict[str, Bound]]:
     """Subcommand -> argparse ``dest`` -> bound, for every numeric option (``render --height`` is
     pixels, ``plan --height`` metres); the options of config fields come from the fields.
     Comma-separated options are parsed by :func:`parse_floats` / :func:`parse_int_list` and
@@ -76,15 +78,6 @@ def _bounds() -> dict[str, dict[str, Bound]]:
     return _BOUNDS
 
 
-def __getattr__(name: str):
-    """``BOUNDS`` and the bounds of config fields (:data:`_FIELD_BOUNDS`), built on first use."""
-    if name == "BOUNDS":
-        return _bounds()
-    if name in _FIELD_BOUNDS:
-        return field_bound(*_FIELD_BOUNDS[name])
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 def command_name(args) -> str:
     """``"plan"``, ``"render"``, ``"evaluate"``, ``"scene export"``, ... of a parsed command line."""
     name = getattr(args, "command", None) or ""
@@ -94,12 +87,12 @@ def command_name(args) -> str:
 
 
 def check_args(args) -> None:
-    """Check every numeric option of a parsed command line against :data:`BOUNDS` (None =
+    """Check every numeric option of a parsed command line against :func:`option_bounds` (None =
     default, skipped), parse-check ``--pose``, ``--start`` and the ``--k`` lists, and check
     ``--cluster`` (:func:`markerplace.runtime.cluster.parse_cluster`; ``--workers`` does not go
     with it, ``--cluster-wait`` only with it). Whether a scheduler answers is checked once the output paths are
     (:func:`markerplace.runtime.cluster.check_scheduler`)."""
-    for dest, bound in _bounds().get(command_name(args), {}).items():
+    for dest, bound in option_bounds().get(command_name(args), {}).items():
         value = getattr(args, dest, None)
         if value is not None:
             bound.check(value)

@@ -15,24 +15,24 @@ import logging
 import sys
 from pathlib import Path
 
-from markerplace import __version__
-from markerplace.errors import UserError
-from markerplace.log import setup_logging
-from markerplace.pipelines.plan import PlanInputs, run_plan
-from markerplace.scene.spec import SceneSpec
-from markerplace.cli.options import add_force_arg, add_plan_args, add_scene_args, plan_config_from_args
-from markerplace.cli.plan_frames import add_frames_args, cmd_plan_frames
 import numpy as np
+
+from markerplace import __version__
 from markerplace.cli.bounds import check_args
+from markerplace.cli.check_command import add_check_parser
 from markerplace.cli.edge import StdoutError, StdoutGuard, check_working_directory, resource_error
-from markerplace.cli.check import add_check_parser
-from markerplace.cli.evaluate import add_evaluate_parser
-from markerplace.cli.export import add_export_parser
+from markerplace.cli.evaluate_command import add_evaluate_parser
+from markerplace.cli.export_command import add_export_parser
+from markerplace.cli.options import add_force_arg, add_plan_args, add_scene_args, plan_config_from_args
+from markerplace.cli.plan_frames_command import add_frames_args, cmd_plan_frames
 from markerplace.cli.scan import add_scan_parsers
-from markerplace.cli.study import add_study_parser
+from markerplace.cli.study_command import add_study_parser
+from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, world_from_cam_pose
+from markerplace.log import setup_logging
 from markerplace.markers import load_markers
-from markerplace.output_checks import check_output_file
+from markerplace.output_paths import check_output_file
+from markerplace.pipelines.plan import PlanInputs, run_plan
 from markerplace.plan.place.methods import PLACEMENT_METHODS
 from markerplace.render.renderer import Renderer
 from markerplace.render.views import default_pose, write_render_outputs
@@ -41,9 +41,10 @@ from markerplace.runtime import cache_home
 from markerplace.runtime.interrupt import InterruptGuard
 from markerplace.runtime.run_folder import close_all
 from markerplace.scene import load_scene
-from markerplace.scene.preflight import allow_large_models
 from markerplace.scene.builtin.catalogue import list_scenes
 from markerplace.scene.export import export_glb
+from markerplace.scene.preflight import allow_large_models
+from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
 from markerplace.validation import COORDINATE, YAW_DEG, check_pose_in_scene, check_render_sees_something, parse_floats
 
@@ -99,7 +100,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Handler of ``markerplace plan``: :func:`markerplace.pipelines.plan.run_plan` (or, with
-    ``--frames``, :func:`markerplace.cli.plan_frames.cmd_plan_frames`), then what it wrote."""
+    ``--frames``, :func:`markerplace.cli.plan_frames_command.cmd_plan_frames`), then what it wrote."""
     if args.frames is not None or args.scene is None:
         return cmd_plan_frames(args)
     frames_only = [f for f, v in (("--mesh", args.mesh), ("--frame-step", args.frame_step),

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import argparse
 import re
+
 from markerplace.cli.main import build_parser
+from markerplace.cli.run_options import RUN_OPTIONS
 from markerplace.pipelines.study import StudyPlan
 from markerplace.plan.config import PlanConfig
-from markerplace.cli.run_options import RUN_OPTIONS
 from markerplace.settings import flagged, shown_default
 from markerplace.testbed.config import EvaluateConfig
 

@@ -4,32 +4,32 @@ discretization, scoring, placement and runtime options, and the
 
 ``--start`` X,Y is given in the user's (file) frame, metres; :func:`markerplace.pipelines.size_guard.check_first_guess`
 moves it into the scene's internal frame after the run-size guard. Lengths are metres.
-Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate` and
-:mod:`markerplace.cli.study`.
+Used by :mod:`markerplace.cli.main` (``plan``), :mod:`markerplace.cli.evaluate_command` and
+:mod:`markerplace.cli.study_command`.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import tomllib
 from dataclasses import fields, replace
 from typing import Sequence
 
-from markerplace.validation import parse_level, parse_xy  # noqa: F401 (the options' parsers, here as before)
+import tomllib
+
 from markerplace.config_file import checked_value, read_config_file
 from markerplace.errors import UserError
 from markerplace.markers import check_tag_budget
 from markerplace.plan.config import PlanConfig
-from markerplace.plan.place.config import K_ALL
-from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
-from markerplace.plan.place.registry import settings_name
 from markerplace.plan.discretize.candidate_rules import parse_allow as parse
+from markerplace.plan.place.config import K_ALL
+from markerplace.plan.place.method_registry import settings_name
+from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
 from markerplace.settings import add_setting_args, apply, values_from_args, walk
 
 log = logging.getLogger(__name__)
 
-__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow", "parse_level", "parse_xy",
+__all__ = ["add_scene_args", "add_plan_args", "add_adopt_arg", "add_force_arg", "parse_allow",
            "plan_config_from_args", "plan_config_for_budgets", "method_conf_values"]
 
 

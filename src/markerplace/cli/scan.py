@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from markerplace.errors import UserError
-from markerplace.output_checks import check_output_file
+from markerplace.output_paths import check_output_file
 from markerplace.scan.frames import FORMATS, open_frameset
 from markerplace.scan.fuse import FuseConfig, fuse_frameset, parse_trunc, refine_up, write_mesh_ply
 from markerplace.scan.simulate import ScanConfig, simulate_scan

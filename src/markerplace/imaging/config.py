@@ -5,13 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from markerplace.geometry import Intrinsics
-from markerplace.localization.features import SIFT_DEFAULT, SIFT_SCORING, SiftConfig
+from markerplace.localization.sift import SIFT_SCORING, SiftConfig
 from markerplace.settings import setting
 
 OBSERVE_VIEWS = ("pose", "location-renders", "location-features")
 """Values of :attr:`ImagingConfig.observe_views`."""
 
-__all__ = ["OBSERVE_VIEWS", "ImagingConfig", "SIFT_SCORING", "SIFT_DEFAULT", "renders_alike"]
+__all__ = ["OBSERVE_VIEWS", "ImagingConfig", "renders_alike"]
 
 
 @dataclass(frozen=True)

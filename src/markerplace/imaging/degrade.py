@@ -1,6 +1,6 @@
 """Image degradations a phone camera adds to what the renderer draws: pure numpy / OpenCV filters
 of an (H, W, 3) uint8 RGB image, each with its parameters given (the testbed's query conditions,
-:mod:`markerplace.testbed.conditions`, draw them per image).
+:mod:`markerplace.simulation.conditions`, draw them per image).
 
 Pixel values are 8-bit digital numbers (DN, 0..255) of the rendered, display-encoded image.
 Gain-type changes (exposure, white balance) act on linear light: the image is decoded with a

@@ -16,12 +16,12 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.localization.features import SiftConfig, extract_sift, lift_to_3d
-from markerplace.markers import Marker
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.features import ImageFeatures
 from markerplace.imaging.visibility import markers_in_view, markers_unoccluded
+from markerplace.localization.sift import SiftConfig, extract_sift, lift_to_3d
 from markerplace.localization.tags import detect_tags
+from markerplace.markers import Marker
 from markerplace.render.renderer import Renderer
 from markerplace.runtime.cache import hash_of
 from markerplace.runtime.executor import WorkerJob

@@ -21,8 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import allocate, atomic_path, write_npy
 from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import allocate, atomic_path, write_npy
 
 log = logging.getLogger(__name__)
 

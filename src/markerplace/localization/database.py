@@ -5,7 +5,7 @@ map image; image i owns features ``offsets[i]:offsets[i+1]`` of ``keypoints`` (N
 pixels, ``descriptors`` (N, 128) float32 SIFT, ``points_world`` (N, 3) float64 world metres;
 tags ``tag_offsets[i]:tag_offsets[i+1]`` of ``tag_ids``; ``vlad`` (M, D) unit VLAD vectors; the
 codebook and the markers. On disk a map is a feature folder
-(:mod:`markerplace.imaging.features`, written by :func:`markerplace.testbed.maps.save_map`):
+(:mod:`markerplace.imaging.features`, written by :func:`markerplace.simulation.maps.save_map`):
 the database is built from it in each worker.
 
 Only features with finite 3D points are kept.
@@ -19,10 +19,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from markerplace.markers import Marker
-from markerplace.localization.features import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
+from markerplace.localization.sift import SIFT_DEFAULT, SiftConfig, extract_sift, lift_to_3d
 from markerplace.localization.tags import detect_tags
 from markerplace.localization.vlad import VladCodebook
+from markerplace.markers import Marker
 
 log = logging.getLogger(__name__)
 

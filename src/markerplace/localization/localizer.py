@@ -33,12 +33,12 @@ from typing import ClassVar
 import cv2
 import numpy as np
 
-from markerplace.registry import Registry, configure
 from markerplace.localization.database import MapDatabase
-from markerplace.localization.features import SIFT_DEFAULT, SiftConfig, extract_sift
 from markerplace.localization.pnp import PnPConfig, estimate_pose
+from markerplace.localization.sift import SIFT_DEFAULT, SiftConfig, extract_sift
 from markerplace.localization.tags import TagDetection, detect_tags, pose_from_tag
 from markerplace.localization.vlad import nearest_by_similarity
+from markerplace.registry import Registry, configure
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 class LocalizerSettings:
     """The settings every localizer has, which the testbed sets (its
     :class:`~markerplace.testbed.config.LocalizationConfig` and seed,
-    :func:`markerplace.testbed.map_setup.localizer_spec`).
+    :func:`markerplace.simulation.map_setup.localizer_spec`).
 
     Attributes:
         use_tags: use the query's tag detections (``evaluate --no-tags`` turns it off).
@@ -119,7 +119,7 @@ class Localizer:
             are the ``config.num_candidates`` (a field of its ``Config``) of highest VLAD
             similarity, after ``exclude``: then the testbed may replay that retrieval to reuse
             the marker-free result of a query no placement changes
-            (:class:`markerplace.testbed.predict.Retrieval`). False: every query is localized.
+            (:class:`markerplace.simulation.placement_localization.Retrieval`). False: every query is localized.
 
     Args:
         db: the map (images with SIFT features, 3D points, VLAD vectors, tags seen).

@@ -22,8 +22,8 @@ import cv2
 import numpy as np
 
 from markerplace.geometry import invert
+from markerplace.localization.sift import to_gray
 from markerplace.markers import FAMILY, Marker
-from markerplace.localization.features import to_gray
 
 log = logging.getLogger(__name__)
 

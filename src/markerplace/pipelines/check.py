@@ -1,6 +1,6 @@
 """``markerplace check PLAN_DIR --installed installed.json``: the tags as a person measured them
-on the walls, compared with the plan (:mod:`markerplace.plan.check`), and what it found written
-(:mod:`markerplace.report.check_report`). The plan folder's cached stages are reused
+on the walls, compared with the plan (:mod:`markerplace.plan.installed_vs_plan`), and what it found written
+(:mod:`markerplace.report.check_outputs`). The plan folder's cached stages are reused
 (:func:`markerplace.pipelines.plan.prepare`); ``check.html`` shows it in 3D
 (:mod:`markerplace.report.check_page`)."""
 
@@ -10,14 +10,13 @@ import logging
 import os
 from pathlib import Path
 
-
 from markerplace.errors import UserError
 from markerplace.markers import check_markers_on_walls, load_markers
 from markerplace.pipelines.plan import prepare
-from markerplace.plan import check
+from markerplace.plan import installed_vs_plan as check
 from markerplace.plan.folder import read_plan_folder
+from markerplace.report.check_outputs import write_check_outputs
 from markerplace.report.check_page import write_check_page
-from markerplace.report.check_report import write_check_outputs
 from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
 from markerplace.runtime.claims import refuse_foreign

@@ -5,17 +5,17 @@ in one run folder, read top to bottom in :func:`run_evaluation`:
    ``evaluate --plan`` starts from a finished plan folder instead, reusing its cached stages and
    its placement (:mod:`markerplace.pipelines.from_plan`);
 2. marker sets: none, OMP (nested k), random and uniform runs, extra placement files
-   (:func:`markerplace.testbed.marker_sets.build_placements`);
-3. test poses per test set, identical for every method (:func:`markerplace.testbed.poses.cached_test_poses`);
+   (:func:`markerplace.simulation.marker_sets.build_placements`);
+3. test poses per test set, identical for every method (:func:`markerplace.simulation.pose_sampling.cached_test_poses`);
 4. marker-free map and query features and the VLAD codebook; the queries once per query
-   condition (``--conditions``, :mod:`markerplace.testbed.conditions`; the map stays clean)
-   (:func:`markerplace.testbed.map_setup.marker_free_images`);
+   condition (``--conditions``, :mod:`markerplace.simulation.conditions`; the map stays clean)
+   (:func:`markerplace.simulation.map_setup.marker_free_images`);
 5. per placement: its map (only images with one of its markers in view are re-rendered) and
-   the predictions of every image set (:func:`markerplace.testbed.predict.predict_placements`);
+   the predictions of every image set (:func:`markerplace.simulation.placement_localization.predict_placements`);
 6. optionally the oracle ceiling (:func:`markerplace.testbed.ceiling.run_ceiling`);
 7. metrics and reports from the predictions (:mod:`markerplace.testbed.reporting`); with
    ``--predicted`` each placement's predicted recall against its measured one
-   (:mod:`markerplace.testbed.predicted`).
+   (:mod:`markerplace.testbed.predicted_per_placement`).
 
 Every stage is cached with the hash of its inputs (:mod:`markerplace.runtime.stages`); an
 interrupted run resumes where it stopped, inside a stage too: the marker-free images, the
@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.imaging.engine import marker_key
 from markerplace.errors import UserError
+from markerplace.imaging.engine import marker_key
 from markerplace.markers import load_markers
 from markerplace.pipelines.from_plan import adopt_plan_stages, plan_placement
 from markerplace.pipelines.plan import prepare
@@ -47,17 +47,17 @@ from markerplace.runtime.claims import refuse_foreign
 from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.testbed.calibration import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
+from markerplace.simulation.conditions import CLEAN, split_set
+from markerplace.simulation.map_setup import map_base_key, marker_free_images, testbed_imaging_config
+from markerplace.simulation.marker_sets import build_placements, find_placement_files, method_names, with_candidate_ids
+from markerplace.simulation.metrics import main_threshold, threshold_label
+from markerplace.simulation.placement_localization import predict_placements
+from markerplace.simulation.pose_sampling import cached_test_poses
+from markerplace.simulation.rendered_images import TestbedImaging
+from markerplace.simulation.success_fit import MAP_SET, calibrate_plan, map_image_set, map_successes, score_outcomes
 from markerplace.testbed.ceiling import SINGLE, ceiling_markdown, run_ceiling, single_placements
-from markerplace.testbed.conditions import CLEAN, split_set
 from markerplace.testbed.config import validate_evaluate_config
-from markerplace.testbed.images import TestbedImaging
-from markerplace.testbed.map_setup import map_base_key, marker_free_images, testbed_imaging_config
-from markerplace.testbed.marker_sets import build_placements, find_placement_files, method_names, with_candidate_ids
-from markerplace.testbed.metrics import main_threshold, threshold_label
-from markerplace.testbed.poses import cached_test_poses
-from markerplace.testbed.predict import predict_placements
-from markerplace.testbed.predicted import predict_recalls
+from markerplace.testbed.predicted_per_placement import predict_recalls
 from markerplace.testbed.reporting.calibration import write_calibration_report
 from markerplace.testbed.reporting.summary import write_outputs
 
@@ -110,7 +110,7 @@ def run_evaluation(scene_spec, plan_config, config, out_dir: str | Path, placeme
         placements_dir: folder of ``placement.json`` files (user frame) evaluated as extra methods.
         imaging_config: the testbed's imaging (default: the plan's camera, OpenCV's SIFT defaults).
         reuse_unchanged: give images no placement's marker can change the marker-free result
-            instead of localizing them again (exact; :mod:`markerplace.testbed.predict`).
+            instead of localizing them again (exact; :mod:`markerplace.simulation.placement_localization`).
         work_dir: folder of the plan's artifacts (``plan/``) and the caches (``cache/``) (default
             ``out_dir``); runs that share it share every stage with the same inputs (``study``).
         extra_placements: more marker sets evaluated as methods: name -> markers (internal frame).

@@ -7,7 +7,7 @@
    (:func:`markerplace.pipelines.plan_frames.prepare_frames`; the query frames are never seen by
    any placement method);
 3. the marker sets: none and the placement methods (random and uniform with their runs), as the
-   simulation testbed makes them (:func:`markerplace.testbed.marker_sets.build_placements`);
+   simulation testbed makes them (:func:`markerplace.simulation.marker_sets.build_placements`);
 4. every image's features once (:mod:`markerplace.testbed.frames.store`): the real frames with
    each placement's tags composited in, and renders of the fused surface at the same poses;
 5. per map kind and placement, the map database and the query frames localized against it
@@ -28,27 +28,26 @@ import numpy as np
 
 from markerplace.imaging.config import ImagingConfig
 from markerplace.imaging.engine import marker_key
-from markerplace.localization.features import SIFT_DEFAULT
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.pipelines.plan_frames import prepare_frames
 from markerplace.plan.frames.surface import FUSED_NAME
 from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, write_page
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
-from markerplace.runtime.cache import hash_of
+from markerplace.runtime.cache import config_dict, hash_of
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import world_offset
-from markerplace.runtime.cache import config_dict
-from markerplace.testbed import metrics
+from markerplace.simulation import metrics
+from markerplace.simulation.map_setup import localizer_spec
+from markerplace.simulation.marker_sets import build_placements
 from markerplace.testbed.config import validate_evaluate_config
 from markerplace.testbed.frames.config import FramesEvalConfig
-from markerplace.testbed.frames.images import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
+from markerplace.testbed.frames.frame_features import REAL, RENDER, FrameJobSpec, FrameWorker, frame_in_view, frame_job, real_image
 from markerplace.testbed.frames.localize import build_map, localize_queries, markers_in_view_of, train_codebook
 from markerplace.testbed.frames.report import frames_markdown, recall_rows, set_label
 from markerplace.testbed.frames.split import block_split
 from markerplace.testbed.frames.store import FeatureStore, image_key
-from markerplace.testbed.map_setup import localizer_spec
-from markerplace.testbed.marker_sets import build_placements
 from markerplace.testbed.reporting.tables import write_recall_csv
 
 log = logging.getLogger(__name__)

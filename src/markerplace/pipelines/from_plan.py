@@ -162,6 +162,6 @@ def adopt_plan_stages(folder: PlanFolder, plan_dir: Path, cache_dir: Path) -> li
 def plan_placement(folder: PlanFolder, data, scene) -> dict[str, list]:
     """{the plan's method: its markers} in the scene's internal frame, on the exact poses of
     the candidates of ``data`` (the prepared plan), for
-    :func:`~markerplace.testbed.marker_sets.build_placements`."""
+    :func:`~markerplace.simulation.marker_sets.build_placements`."""
     markers, _ = folder.planned_on_candidates(data.disc.candidate_world_from_marker, world_offset(scene))
     return {folder.config.placement.method: markers}

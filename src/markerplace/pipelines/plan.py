@@ -25,21 +25,19 @@ from markerplace.markers import Marker, check_markers_on_walls, check_tag_budget
 from markerplace.pipelines.size_guard import check_first_guess, measured_size_check
 from markerplace.plan.config import PlanConfig, validate, warn_unused_settings
 from markerplace.plan.discretize.artifact import Discretization
-from markerplace.plan.discretize.exclusion import (apply_exclusion, describe_changes, load_exclusion,
-                                                   placement_changes, previous_markers)
+from markerplace.plan.discretize.exclusion import apply_exclusion, describe_changes, load_exclusion, placement_changes, previous_markers
 from markerplace.plan.discretize.stage import run_discretize
 from markerplace.plan.observe import run_observe
 from markerplace.plan.place.greedy import check_k
-from markerplace.plan.place.predicted import (model_methods, place_for_target, predicted_recall, score_bound,
-                                              wants_success_model)
+from markerplace.plan.place.predicted_recall import model_methods, place_for_target, predicted_recall, score_bound, wants_success_model
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity
 from markerplace.plan.types import PlanData
 from markerplace.plan.where import Where, disc_pose_weights, load_where
+from markerplace.report.output_files import output_file_patterns
 from markerplace.report.plan_outputs import write_plan_outputs
 from markerplace.report.plan_report import write_plan_report
-from markerplace.report.output_files import output_file_patterns
 from markerplace.report.tagmaps.write import tag_map_patterns
 from markerplace.runtime import run_folder
 from markerplace.runtime.claims import refuse_foreign
@@ -47,8 +45,8 @@ from markerplace.runtime.cluster import check_scheduler
 from markerplace.runtime.executor import make_executor
 from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, world_offset
-from markerplace.testbed.calibration import calibrate_plan
-from markerplace.testbed.map_setup import observed_map_output, testbed_imaging_config
+from markerplace.simulation.map_setup import observed_map_output, testbed_imaging_config
+from markerplace.simulation.success_fit import calibrate_plan
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +87,7 @@ def prepare(scene_spec: SceneSpec, config: PlanConfig, run_dir: str | Path, exis
         where: the ``--where`` file (:mod:`markerplace.plan.where`, user frame): the returned
             data's ``pose_weight``, computed (and a file that holds no pose refused) right after
             discretize, before anything renders. No cached stage depends on it.
-        map_cache: a testbed cache folder (:mod:`markerplace.testbed.map_setup`): when observe
+        map_cache: a testbed cache folder (:mod:`markerplace.simulation.map_setup`): when observe
             runs, its renders also give the testbed's marker-free map features there, so the
             map is not rendered again (None: not).
         map_imaging: the testbed's imaging settings (None: the plan's camera, OpenCV SIFT).
@@ -161,9 +159,9 @@ class PlanResult:
 
 def run_plan(config: PlanConfig, scene_spec: SceneSpec, out: str | Path, inputs: PlanInputs = PlanInputs()) -> PlanResult:
     """Plan ``config.placement.k`` tags in the scene (with ``target_recall``: as many as reach
-    it, k at most: :func:`~markerplace.plan.place.predicted.place_for_target`) and write every
+    it, k at most: :func:`~markerplace.plan.place.predicted_recall.place_for_target`) and write every
     deliverable into ``out``; placement.json and report.html carry the predicted recall against
-    k where the success model was fitted (:func:`~markerplace.plan.place.predicted.wants_success_model`).
+    k where the success model was fitted (:func:`~markerplace.plan.place.predicted_recall.wants_success_model`).
 
     Every input is read and checked before any work; the folder is then opened as this run's
     (marked, locked, only markerplace's own files rewritten: :mod:`markerplace.runtime.run_folder`).

@@ -8,8 +8,8 @@ needed).
 2. surface: fused from the same frames (``fused.ply``, cached) or ``--mesh``
    (:mod:`markerplace.plan.frames.surface`);
 3. candidates on that surface and the top-down grid, saved as ``discretization.npz``
-   (:mod:`markerplace.plan.frames.candidates`, :mod:`markerplace.plan.frames.layout`);
-4. observations from the real images, ``observations/`` (:mod:`markerplace.plan.frames.observe`);
+   (:mod:`markerplace.plan.frames.candidates`, :mod:`markerplace.plan.frames.top_view`);
+4. observations from the real images, ``observations/`` (:mod:`markerplace.plan.frames.observations`);
    then look-alikes and scores exactly as the mesh plan (with the frames' K).
 
 :func:`run_plan_frames` adds placement and the mesh plan's deliverables; the scene of the
@@ -39,12 +39,12 @@ from markerplace.plan.discretize.artifact import save as save_discretization
 from markerplace.plan.discretize.exclusion import apply_exclusion, load_exclusion
 from markerplace.plan.folder import FRAMES_SCENE_PREFIX
 from markerplace.plan.frames.candidates import frame_candidates
-from markerplace.plan.frames.layout import floor_height, frames_discretization
-from markerplace.plan.frames.observe import run_frame_observe
+from markerplace.plan.frames.observations import run_frame_observe
 from markerplace.plan.frames.poses import plan_intrinsics
 from markerplace.plan.frames.surface import FUSE, frames_key, surface_path
+from markerplace.plan.frames.top_view import floor_height, frames_discretization
 from markerplace.plan.place.greedy import check_k
-from markerplace.plan.place.predicted import predicted_recall, score_bound, wants_success_model
+from markerplace.plan.place.predicted_recall import predicted_recall, score_bound, wants_success_model
 from markerplace.plan.place.stage import first_pick_gain, place
 from markerplace.plan.score.stage import geometric_visibility, score_poses
 from markerplace.plan.similarity.stage import run_similarity

@@ -39,8 +39,8 @@ from markerplace.progress import format_duration
 from markerplace.render.renderer import RenderResult
 from markerplace.runtime.workers import default_workers
 from markerplace.scene.worldframe import points_to_internal, world_offset
-from markerplace.testbed.marker_sets import NO_MARKERS, marker_set_count
-from markerplace.validation import OCCUPANCY_CELL
+from markerplace.settings import OCCUPANCY_CELL
+from markerplace.simulation.marker_sets import NO_MARKERS, marker_set_count
 
 log = logging.getLogger(__name__)
 

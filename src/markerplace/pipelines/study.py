@@ -27,18 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path
-from markerplace.settings import apply, setting
-from markerplace.validation import parse_float_list
-from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
-from markerplace.pipelines.evaluate import (RUN_OUTPUTS, STAGE_OUTPUTS, RunInputs, open_evaluation_folder,
-                                            run_evaluation)
+from markerplace.pipelines.evaluate import RUN_OUTPUTS, STAGE_OUTPUTS, RunInputs, open_evaluation_folder, run_evaluation
 from markerplace.pipelines.plan import prepare
 from markerplace.plan.config import validate
 from markerplace.plan.place.stage import place
 from markerplace.report.figures import recall_vs_k
-from markerplace.testbed.metrics import hit_mask, main_threshold, threshold_label
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.settings import apply, setting
+from markerplace.simulation.metrics import hit_mask, main_threshold, threshold_label
+from markerplace.testbed.config import DiagnosticsConfig, validate_evaluate_config
 from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference
+from markerplace.validation import parse_float_list
 
 log = logging.getLogger(__name__)
 

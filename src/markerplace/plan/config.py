@@ -15,9 +15,9 @@ from markerplace.errors import UserError
 from markerplace.imaging.config import ImagingConfig
 from markerplace.plan.discretize.stage import DiscretizeConfig
 from markerplace.plan.place.config import PlacementConfig
+from markerplace.plan.place.method_registry import settings_name
 from markerplace.plan.place.methods import PLACEMENT_METHODS, method_conf
-from markerplace.plan.place.registry import settings_name
-from markerplace.plan.place.predicted import model_methods
+from markerplace.plan.place.predicted_recall import model_methods
 from markerplace.plan.score.localizability import NoiseConfig
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.similarity.config import SimilarityConfig
@@ -25,7 +25,7 @@ from markerplace.runtime.executor import RuntimeConfig
 from markerplace.settings import NO_CONST, walk
 from markerplace.validation import check_plan_config
 
-__all__ = ["PlanConfig", "PlacementConfig", "validate", "warn_unused_settings"]
+__all__ = ["PlanConfig", "validate", "warn_unused_settings"]
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ def check_choices(config) -> None:
 
 def warn_unused_settings(config: PlanConfig) -> None:
     """Log a warning for each method setting that has no effect: one of a method the plan
-    neither places nor calibrates (:func:`~markerplace.plan.place.predicted.model_methods`)."""
+    neither places nor calibrates (:func:`~markerplace.plan.place.predicted_recall.model_methods`)."""
     p = config.placement
     used = set(model_methods(p))
     for name, cls in PLACEMENT_METHODS.items():

@@ -15,17 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.errors import UserError
-from markerplace.markers import Marker, check_markers_on_walls, marker_from_json
-from markerplace.scene.spec import SceneSpec
 from markerplace.config_file import upgrade_legacy
+from markerplace.errors import UserError
 from markerplace.jsonfile import read_json
+from markerplace.markers import Marker, check_markers_on_walls, marker_from_json
 from markerplace.plan.config import PlanConfig
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.stage import discretize_key
-from markerplace.runtime import cache
-from markerplace.runtime import run_folder
+from markerplace.runtime import cache, run_folder
 from markerplace.runtime.run_lock import lock_for_reading
+from markerplace.scene.spec import SceneSpec
 from markerplace.scene.worldframe import markers_to_internal, points_to_internal, world_offset
 
 log = logging.getLogger(__name__)

@@ -32,11 +32,10 @@ import numpy as np
 from markerplace.imaging.config import ImagingConfig, renders_alike
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.features import FeatureSet, FeatureWriter, ImageFeatures
-from markerplace.imaging.location_views import (FaceLayout, crop, face_layout, location_groups, split_features,
-                                                 unoccluded_from_faces, warp_view)
-from markerplace.render.renderer import RenderResult
+from markerplace.imaging.location_views import FaceLayout, crop, face_layout, location_groups, split_features, unoccluded_from_faces, warp_view
 from markerplace.imaging.visibility import MARKER_SAMPLES, marker_points
 from markerplace.progress import progress_bar
+from markerplace.render.renderer import RenderResult
 from markerplace.runtime import cache
 from markerplace.runtime.atomic_io import write_npy
 from markerplace.runtime.executor import RuntimeConfig, make_executor
@@ -55,7 +54,7 @@ class MapOutput:
     Attributes:
         folder: the map's feature folder (the testbed's ``map_base/features``).
         key: the cache key the testbed gives those features
-            (:func:`markerplace.testbed.images.base_features_key`); the folder is marked done
+            (:func:`markerplace.simulation.rendered_images.base_features_key`); the folder is marked done
             with it.
         config: the testbed's imaging settings: the same camera and depth settings as
             observe's, its own SIFT preset (refused otherwise: the render would differ).

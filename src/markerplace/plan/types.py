@@ -79,7 +79,7 @@ class PlanData:
             ``marker_sizes`` (C + E,) metres it rebuilds the coverages under another marker
             model (:func:`~markerplace.plan.score.stage.coverages_with_model`).
         calibration: what a calibrated method needs, filled by
-            :func:`markerplace.testbed.calibration.calibrate_plan` (e.g. the fitted
+            :func:`markerplace.simulation.success_fit.calibrate_plan` (e.g. the fitted
             :class:`~markerplace.plan.score.success_model.SuccessModel` of ``expected-recall``).
         marker_model: the registered marker model the coverages were computed with.
         pose_weight: (N,) weight >= 0 of each pose, summing to N (``plan --where``:

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.input_checks import check_input_file
+from markerplace.input_paths import check_input_file
 from markerplace.jsonfile import read_json
 
 log = logging.getLogger(__name__)

@@ -18,8 +18,8 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
 from markerplace.render import shaders
-from markerplace.tagfamily import tag_image
 from markerplace.render.vertices import VERTEX_ATTRS
+from markerplace.tagfamily import tag_image
 
 log = logging.getLogger(__name__)
 

@@ -45,11 +45,11 @@ import numpy as np
 
 from markerplace.geometry import Intrinsics, invert
 from markerplace.markers import Marker
-from markerplace.scene.types import MeshPart, Scene
 from markerplace.render.culling import chunk_ranges, frustum_planes, visible_chunks
 from markerplace.render.draws import Draw, OcclusionTest, by_distance, query_framebuffer, scene_buffers
 from markerplace.render.gl_resources import FAR, NEAR, build_program, create_context, projection_matrix, tag_texture, upload_texture, vertex_array
 from markerplace.render.vertices import marker_vertices, part_vertices
+from markerplace.scene.types import MeshPart, Scene
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ __all__ = ["write_check_page", "card_id"]
 
 
 def card_id(row) -> str:
-    """The page id of a :class:`~markerplace.plan.check.TagRow`'s card."""
+    """The page id of a :class:`~markerplace.plan.installed_vs_plan.TagRow`'s card."""
     return f"tag{row.order}" if row.order else f"extra{row.installed_id}"
 
 
@@ -53,7 +53,7 @@ def write_check_page(out: str | Path, scene, result, planned: Sequence, found: S
     Args:
         out: the check's output folder (holding ``check_map.png``).
         scene: the plan's scene (internal frame).
-        result: the :class:`~markerplace.plan.check.CheckResult`.
+        result: the :class:`~markerplace.plan.installed_vs_plan.CheckResult`.
         planned: the planned :class:`~markerplace.markers.Marker` list (internal frame, placement order).
         found: the tags as installed or found (internal frame).
         camera_path: (P, 3) camera positions of a photo walk (internal frame, metres), or None.

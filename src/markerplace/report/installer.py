@@ -29,8 +29,8 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.geometry import Intrinsics, project, world_from_cam_pose
-from markerplace.tagfamily import outer_size
 from markerplace.render.renderer import Renderer
+from markerplace.tagfamily import outer_size
 
 __all__ = ["CLOSE_DISTANCE", "WIDE_DISTANCE", "standing_distance", "wide_turn", "InstallerViews", "render_installer_views",
            "draw_outline", "draw_dimension", "Label", "LabelLayout"]

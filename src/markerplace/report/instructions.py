@@ -41,8 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
-from markerplace.report.captions import MAX_RANGE, TagPlace, WallEnd, describe_tag, facing_name, wall_side
-from markerplace.report.captions import facing_label
+from markerplace.report.captions import MAX_RANGE, TagPlace, WallEnd, describe_tag, facing_label, facing_name, wall_side
 from markerplace.runtime.atomic_io import fixed
 from markerplace.scene.raycast import RayCaster
 

@@ -33,10 +33,10 @@ import logging
 from pathlib import Path
 from typing import Sequence
 
-from markerplace.runtime.atomic_io import atomic_path
-from markerplace.tagfamily import outer_size
 from markerplace.report.printable import black_runs, caption_for, tag_modules
 from markerplace.report.sheets import MARGIN_MM, PAPERS_MM, TileLayout, caption_block_mm, check_paper, sheet_advice, sheet_plan
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.tagfamily import outer_size
 
 log = logging.getLogger(__name__)
 

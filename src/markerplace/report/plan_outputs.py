@@ -6,23 +6,22 @@ import csv
 import io
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from markerplace.runtime import run_folder
-from markerplace.runtime.cache import config_dict
-from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
 from markerplace.plan.score.localizability import entropy
-from markerplace.report.figures import floor_map, per_location_mean
-from markerplace.report.instructions import install_to_frame
-from markerplace.report.sheets import sheet_plan
-from markerplace.report.printable import write_tag_sheets
-from dataclasses import replace
-from markerplace.report.output_files import PlanOutputs, write_output_files
 from markerplace.report.deliverables import write_deliverables
-from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row, install_instructions
+from markerplace.report.figures import floor_map, per_location_mean
+from markerplace.report.instructions import CHECKLIST_COLUMNS, checklist_row, install_instructions, install_to_frame
+from markerplace.report.output_files import PlanOutputs, write_output_files
+from markerplace.report.printable import write_tag_sheets
+from markerplace.report.sheets import sheet_plan
+from markerplace.runtime import run_folder
+from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
+from markerplace.runtime.cache import config_dict
 from markerplace.scene.worldframe import discretization_to_user, markers_to_user
 
 log = logging.getLogger(__name__)
@@ -109,7 +108,7 @@ def write_plan_outputs(out_dir: str | Path, *, data, placement, first_gain: np.n
     (:mod:`markerplace.report.deliverables`); ``exclusion`` (``--exclude``,
     :class:`~markerplace.plan.discretize.exclusion.Exclusion`, user frame) goes there too.
     ``predicted`` (``predicted_recall`` and ``score_bound``,
-    :mod:`markerplace.plan.place.predicted`) goes into placement.json as it is. ``where``
+    :mod:`markerplace.plan.place.predicted_recall`) goes into placement.json as it is. ``where``
     (``--where``, :class:`~markerplace.plan.where.Where`) goes into config.json as read; with
     ``data.pose_weight`` the summary gets a ``where`` object (weighted mean scores, the poses
     that weigh) and ``where.png`` maps the mean weight per location.

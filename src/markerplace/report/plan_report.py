@@ -25,15 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.report.html import esc, img, jpeg_uri, png_file_uri, table, write_page
-from markerplace.report.view3d import scene_view_html
-from markerplace.report.review import REVIEW_SCRIPT, reject_button, review_box, surface_line
 from markerplace.markers import load_markers
-from markerplace.plan.discretize.wall_candidates import RULES, rule_words
+from markerplace.plan.discretize.candidate_rules import RULES, rule_words
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.report.html import esc, img, jpeg_uri, png_file_uri, table, write_page
 from markerplace.report.installer import render_installer_views
+from markerplace.report.instructions import along_words, height_words, install_to_frame, pages_words, place_from_install, storey_words, wall_words
 from markerplace.report.recall_section import recall_section
-from markerplace.report.instructions import (along_words, height_words, install_to_frame, pages_words, place_from_install, storey_words, wall_words)
+from markerplace.report.review import REVIEW_SCRIPT, reject_button, review_box, surface_line
+from markerplace.report.view3d import scene_view_html
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.worldframe import markers_to_internal
 

@@ -16,10 +16,10 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from markerplace.report.instructions import caption_lines
+from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.tagfamily import QUIET_BITS, TAG_BITS, outer_size, tag_image
-from markerplace.runtime import run_folder
-from markerplace.report.instructions import caption_lines
 
 
 def tag_modules(tag_id: int) -> np.ndarray:

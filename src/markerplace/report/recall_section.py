@@ -1,7 +1,7 @@
 """The "How many tags" section of a plan's ``report.html``: predicted recall against k.
 
 Reads ``predicted_recall`` and ``score_bound`` of ``placement.json``
-(:mod:`markerplace.plan.place.predicted`) and draws the curve as an inline SVG (no figure file,
+(:mod:`markerplace.plan.place.predicted_recall`) and draws the curve as an inline SVG (no figure file,
 no matplotlib): the predicted share of camera poses that localize after the first 1, 2, ..., k
 tags of the plan's own order, the knee, the recall target (``--target-recall``) and the upper
 bound of any k candidates. A plan without a fitted model gets one paragraph saying how to get it.

@@ -12,9 +12,9 @@ stages and prints what changed.
 from __future__ import annotations
 
 import json
+from urllib.parse import quote
 
 from markerplace.report.html import esc
-from urllib.parse import quote
 
 __all__ = ["surface_line", "reject_button", "review_box", "REVIEW_SCRIPT"]
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from markerplace.errors import UserError
-from markerplace.tagfamily import outer_size
 from markerplace.report.printable import caption_for
+from markerplace.tagfamily import outer_size
 
 PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4), "a3": (297.0, 420.0)}
 """Portrait paper sizes (width, height), millimetres."""

@@ -28,8 +28,8 @@ import numpy as np
 
 from markerplace.runtime.atomic_io import atomic_path
 from markerplace.scene.export import GLTF_FROM_WORLD, scene_to_glb_bytes
-from markerplace.scene.types import MeshPart, Scene
 from markerplace.scene.source import world_from_file_rotation
+from markerplace.scene.types import MeshPart, Scene
 from markerplace.scene.worldframe import markers_to_internal, world_offset
 from markerplace.tagfamily import outer_size, tag_image
 

@@ -174,7 +174,7 @@ def results_as_completed(client, futures: Sequence, address: str, wait_s: float)
             raise UserError(f"--cluster {address}: a task was running on {ALLOWED_FAILURES} Dask workers that died "
                             f"({done} of {n} tasks finished); out of memory? See the workers' logs, then re-run the "
                             "same command (finished stages and parts are reused)") from None
-        except (OSError, TimeoutError) as err:
+        except (OSError, TimeoutError):
             try:
                 running_threads(client)
             except SchedulerLost:

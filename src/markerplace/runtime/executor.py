@@ -31,18 +31,25 @@ from __future__ import annotations
 import logging
 import math
 import os
+import signal
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
 from markerplace.errors import UserError
-from markerplace.settings import setting
 from markerplace.runtime.cache_home import cache_root
 from markerplace.runtime.cluster import SCHEDULER_TIMEOUT_S, check_scheduler, parse_cluster
-from markerplace.runtime.cluster_watch import (CLUSTER_WAIT_S, SchedulerLost, lost_scheduler, results_as_completed,
-                                               running_threads, silence_dask, wait_for_workers)
+from markerplace.runtime.cluster_watch import (
+    CLUSTER_WAIT_S,
+    SchedulerLost,
+    lost_scheduler,
+    results_as_completed,
+    running_threads,
+    silence_dask,
+    wait_for_workers,
+)
 from markerplace.runtime.workers import WORKER_ENV, children_without_sigint, default_workers, single_threaded_libraries, spawn_pool
-import signal
+from markerplace.settings import setting
 
 log = logging.getLogger(__name__)
 

@@ -29,10 +29,10 @@ import time
 from pathlib import Path
 from typing import Iterable
 
-from markerplace.errors import UserError, write_error
-from markerplace.runtime.run_lock import RunLock, check_bookkeeping, release_readers
 from markerplace import __version__
-from markerplace.output_checks import check_output_dir
+from markerplace.errors import UserError, write_error
+from markerplace.output_paths import check_output_dir
+from markerplace.runtime.run_lock import RunLock, check_bookkeeping, release_readers
 
 log = logging.getLogger(__name__)
 

@@ -10,6 +10,7 @@ stale, one from another host is refused.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import logging
 import os
@@ -19,7 +20,6 @@ import time
 from pathlib import Path
 
 from markerplace.errors import UserError, write_error
-import fcntl
 
 log = logging.getLogger(__name__)
 

@@ -25,8 +25,9 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
-from typing import Callable, Iterator
 from multiprocessing import resource_tracker
+from typing import Callable, Iterator
+
 from markerplace.runtime.interrupt import deferred
 
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "LP_NUM_THREADS": "0"}

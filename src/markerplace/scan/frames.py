@@ -29,7 +29,7 @@ The other layouts: TUM RGB-D (``--format tum``, :mod:`markerplace.scan.tum`), 7-
 :mod:`markerplace.scan.stray`); the frame types and shared parsing are in
 :mod:`markerplace.scan.frameset`. This module reads and writes the markerplace layout, detects
 the layout of a folder and opens it with its up axis turned to +z (:func:`open_frameset`, rule
-in :mod:`markerplace.scan.up`); :func:`load_frame` (from :mod:`markerplace.scan.images`) loads
+in :mod:`markerplace.scan.up`); :func:`load_frame` (from :mod:`markerplace.scan.frame_images`) loads
 a frame's images.
 
 Every problem with a frame set raises :class:`~markerplace.errors.UserError` with one line that
@@ -46,17 +46,13 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.runtime.atomic_io import atomic_path
-from markerplace.scan.frameset import (FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers,
-                       read_intrinsics)
-from markerplace.scan.images import load_frame
+from markerplace.runtime.atomic_io import atomic_path, write_image, write_json
+from markerplace.scan.frameset import FRAME_NAME_RE, FrameRecord, FrameSet, check_rigid, data_lines, intrinsics_dict, parse_numbers, read_intrinsics
 from markerplace.scan.nerfstudio import read_nerfstudio
 from markerplace.scan.sevenscenes import GRAVITY_FILE, read_7scenes, read_gravity
 from markerplace.scan.stray import STRAY_UP, STRAY_UP_SOURCE, read_stray
 from markerplace.scan.tum import TUM_MAX_DT, read_tum
-from markerplace.scan.up import (SPREAD_WARN_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_cameras, parse_up,
-                                 world_from_input)
-from markerplace.runtime.atomic_io import write_image, write_json
+from markerplace.scan.up import SPREAD_WARN_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_cameras, parse_up, world_from_input
 
 log = logging.getLogger(__name__)
 
@@ -242,5 +238,5 @@ class FrameWriter:
 
 
 __all__ = ["FORMATS", "MARKERPLACE_DEPTH_SCALE", "READERS", "detect_format", "read_markerplace", "layout_up", "orient",
-           "open_frameset", "load_frame",
+           "open_frameset",
            "FrameWriter"]

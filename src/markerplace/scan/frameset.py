@@ -95,7 +95,7 @@ class FrameSet:
         root: the frame folder.
         format: ``"markerplace"``, ``"tum"``, ``"7scenes"``, ``"nerfstudio"`` or ``"stray"``.
         intrinsics: pinhole model of the (undistorted) colour image and of the depth delivered
-            by :func:`~markerplace.scan.frames.load_frame` (pixels), for frames without their own.
+            by :func:`~markerplace.scan.frame_images.load_frame` (pixels), for frames without their own.
         depth_scale: depth PNG units per metre.
         frames: the frames, in order.
         up_source: where the up axis came from (``"--up"``, ``"gravity-direction.txt"``,
@@ -104,7 +104,7 @@ class FrameSet:
             ``frames[i].world_from_cam = world_from_input @ (pose as written)``.
         depth_intrinsics: pinhole model of the depth images as stored when their camera is not
             the colour camera (7-Scenes), or None: the depth is registered to the colour (or a
-            scaled copy of it). :func:`~markerplace.scan.frames.load_frame` resamples such depth
+            scaled copy of it). :func:`~markerplace.scan.frame_images.load_frame` resamples such depth
             into the colour camera (zero-baseline model: colour pixel ``x`` reads the depth pixel
             ``K_depth K_colour^-1 x``; the poses are the depth camera's).
     """
@@ -124,7 +124,7 @@ CONFIDENCE_MIN = 1
 
 
 def frame_intrinsics(fs: FrameSet, rec: FrameRecord) -> Intrinsics:
-    """The pinhole camera of ``rec``'s images as :func:`~markerplace.scan.frames.load_frame`
+    """The pinhole camera of ``rec``'s images as :func:`~markerplace.scan.frame_images.load_frame`
     returns them: the frame's own, else the set's."""
     return rec.intrinsics if rec.intrinsics is not None else fs.intrinsics
 

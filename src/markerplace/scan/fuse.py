@@ -32,9 +32,9 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, invert
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.progress import track
-from markerplace.scan.frames import load_frame
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.scan.frame_images import load_frame
 from markerplace.scan.frameset import FrameSet, frame_intrinsics
 from markerplace.scan.up import MESH_REFINE_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_mesh, world_from_input
 
@@ -251,7 +251,7 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
         the legacy Open3D mesh of :meth:`TSDFFusion.extract_mesh`.
 
     Raises:
-        UserError: a bad image (see :func:`~markerplace.scan.frames.load_frame`), or no surface.
+        UserError: a bad image (see :func:`~markerplace.scan.frame_images.load_frame`), or no surface.
     """
     config.validate()
     frames = fs.frames[:: int(config.every)]

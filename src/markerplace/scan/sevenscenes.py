@@ -21,7 +21,7 @@
   (``benchmarks/sevenscenes_colour_focal.py``: SIFT matches between frames 6 apart, lifted by the
   depth and reprojected with the poses) the median reprojection error is 1.5-1.6 px for colour
   focal lengths 510-525 against 2.6 px at 585. The depth is resampled into the colour camera
-  with a zero baseline (:func:`markerplace.scan.images.register_depth`; the cameras' real offset,
+  with a zero baseline (:func:`markerplace.scan.frame_images.register_depth`; the cameras' real offset,
   a few centimetres, is unknown): the poses are the depth camera's.
 * Frames are the ``frame-*.pose.txt`` files in name order.
 

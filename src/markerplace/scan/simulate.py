@@ -26,12 +26,12 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
 from markerplace.progress import track
-from markerplace.scene.types import Scene
+from markerplace.render.renderer import Renderer
 from markerplace.scan.depth_noise import DEPTH_SCALE, DepthNoiseConfig, camera_rays, noisy_depth, to_depth_png
+from markerplace.scan.frames import FrameWriter
 from markerplace.scan.fuse import FuseConfig, TSDFFusion
 from markerplace.scan.walk import WalkConfig, plan_walk, seeded_rng
-from markerplace.render.renderer import Renderer
-from markerplace.scan.frames import FrameWriter
+from markerplace.scene.types import Scene
 
 log = logging.getLogger(__name__)
 

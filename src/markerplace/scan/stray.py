@@ -24,7 +24,7 @@ Conventions, from the app's source (github.com/strayrobots/scanner) rather than 
   parallel to gravity, origin where the recording started. So up is +y (``up_source`` "layout
   (ARKit world, y up)").
 * Depth (``DepthEncoder.swift``, ``docs/format.md``): 16-bit PNG, millimetres, registered to the
-  colour image at a lower resolution; :func:`~markerplace.scan.frames.load_frame` upsamples it
+  colour image at a lower resolution; :func:`~markerplace.scan.frame_images.load_frame` upsamples it
   (nearest neighbour, pixel centres aligned) to the colour size and K.
 * Frame numbers: ``frame`` is the depth/confidence file number and the video frame index.
 

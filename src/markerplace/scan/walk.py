@@ -24,8 +24,8 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.geometry import rotation_from_yaw
-from markerplace.scene.types import Room, Scene
 from markerplace.scene.raycast import RayCaster
+from markerplace.scene.types import Room, Scene
 
 log = logging.getLogger(__name__)
 

@@ -12,13 +12,13 @@ import os
 from pathlib import Path
 
 from markerplace.errors import UserError
-from markerplace.scene.types import MeshPart, Room, Scene
 from markerplace.scene.builtin.catalogue import builtin_names, get_builtin
 from markerplace.scene.loader import SUPPORTED_EXTENSIONS, load_mesh_file
+from markerplace.scene.types import Scene
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_scene", "MeshPart", "Room", "Scene"]
+__all__ = ["load_scene"]
 
 
 def load_scene(spec: str, up: str | None = None, unit_scale: float | None = None, seed: int = 0) -> Scene:

@@ -41,19 +41,19 @@ OBJ faces by material, so ``o``/``g`` names are not kept); never the file's own 
 from __future__ import annotations
 
 import hashlib
+import io
 import logging
 from pathlib import Path
 
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.scene.worldframe import OFFSET_KEY
-from markerplace.input_checks import input_kind
+from markerplace.input_paths import input_kind
 from markerplace.scene import preflight, sanity
 from markerplace.scene.mesh_text import decode_text, original_names
 from markerplace.scene.transparency import material_transparency, read_gltf_json
 from markerplace.scene.types import MeshPart, Scene
-import io
+from markerplace.scene.worldframe import OFFSET_KEY
 
 log = logging.getLogger(__name__)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import logging
+import multiprocessing
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -24,7 +25,6 @@ import numpy as np
 
 from markerplace.errors import UserError
 from markerplace.scene.mesh_text import decode_text, original_names
-import multiprocessing
 
 log = logging.getLogger("markerplace.scene.loader")
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from markerplace.scene.builtin.catalogue import builtin_names
 from markerplace.scene.loader import up_rotation
 

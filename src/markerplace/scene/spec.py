@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 from markerplace.scene import load_scene
 
 __all__ = ["SceneSpec"]

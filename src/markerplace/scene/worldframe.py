@@ -19,11 +19,10 @@ the same in both frames.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import fields, replace
 from typing import Sequence
 
 import numpy as np
-from dataclasses import fields
 
 OFFSET_KEY = "world_offset"
 

@@ -30,11 +30,10 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.markers import FAMILY, Marker
-from markerplace.testbed.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
-from markerplace.testbed.calibration import MAP_SET
-from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, with_candidate_ids
-from markerplace.testbed.predict import PredictContext, predict_placements
-from markerplace.testbed.marker_sets import baseline_methods
+from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES, PlacementRun, baseline_methods, with_candidate_ids
+from markerplace.simulation.metrics import MAIN_THRESHOLD, hit_mask, pose_errors_batch
+from markerplace.simulation.placement_localization import PredictContext, predict_placements
+from markerplace.simulation.success_fit import MAP_SET
 
 log = logging.getLogger(__name__)
 
@@ -163,7 +162,7 @@ def held_out_gains(base: np.ndarray, hits: np.ndarray, k: int, rng: np.random.Ge
 
 
 def single_tag_outcomes(predictions: dict, test_poses: dict, C: int, threshold=MAIN_THRESHOLD) -> dict:
-    """:func:`single_tag_hits` of every test set (test set -> :class:`~markerplace.testbed.poses.TestPoses`):
+    """:func:`single_tag_hits` of every test set (test set -> :class:`~markerplace.simulation.pose_sampling.TestPoses`):
     test set -> ((Q,) bool without markers, (C, Q) bool with candidate c alone)."""
     return {ts: single_tag_hits(predictions, tp.world_from_cam, ts, C, threshold) for ts, tp in test_poses.items()}
 

@@ -5,17 +5,17 @@ recall is counted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from markerplace.errors import UserError
-from markerplace.settings import SEED_MAX, setting
-from markerplace.testbed.conditions import CLEAN, CONDITIONS
-from markerplace.testbed.metrics import THRESHOLDS
-from markerplace.testbed.marker_sets import NO_MARKERS, method_names
-from markerplace.testbed.poses import ALL_TEST_SETS, TEST_SETS, WHERE_SET
-from dataclasses import fields
 from markerplace.localization.localizer import LOCALIZERS
 from markerplace.plan.place.methods import PLACEMENT_METHODS
+from markerplace.settings import SEED_MAX, setting
+from markerplace.simulation.conditions import CLEAN, CONDITIONS
+from markerplace.simulation.config import LocalizationConfig
+from markerplace.simulation.marker_sets import NO_MARKERS, method_names
+from markerplace.simulation.metrics import THRESHOLDS
+from markerplace.simulation.pose_sampling import ALL_TEST_SETS, TEST_SETS, WHERE_SET
 from markerplace.validation import check_evaluate_config, parse_int_list
 
 #: ``--tag-ids`` choices (:attr:`StudyConfig.tag_ids`).
@@ -37,11 +37,7 @@ def _placement_help() -> str:
     return PLACEMENT_METHODS.help()
 
 
-def _localizers():
-    return LOCALIZERS
-
-
-__all__ = ["TestSetConfig", "StudyConfig", "LocalizationConfig", "DiagnosticsConfig", "EvaluateConfig", "validate_evaluate_config"]
+__all__ = ["TestSetConfig", "StudyConfig", "DiagnosticsConfig", "EvaluateConfig", "validate_evaluate_config"]
 
 
 @dataclass(frozen=True)
@@ -53,7 +49,7 @@ class TestSetConfig:
         sets: ``weighted`` (towards low scores), ``uniform`` and, with ``--where``, ``where``.
         seed: seed of the test poses and the shift signs alone; None = the run's ``seed``.
         min_clearance: test cameras need this clearance (metres) from non-free cells.
-        conditions: query conditions (:mod:`markerplace.testbed.conditions`): every test set
+        conditions: query conditions (:mod:`markerplace.simulation.conditions`): every test set
             is localized under each (``clean``: as the map is rendered, the default, every
             result before conditions existed); the map stays clean.
     """
@@ -101,7 +97,7 @@ class StudyConfig:
             in placement order. ``candidate``: a marker on candidate spot c shows id c in every
             placement, any other marker an id above the candidates, one per pose; then two
             placements with the same spots in an image's view draw the same image, whose render
-            is shared (:mod:`markerplace.testbed.render_store`), which makes the ceiling's
+            is shared (:mod:`markerplace.simulation.render_store`), which makes the ceiling's
             single-tag runs and runs of several k cheaper. The codes differ, so results differ
             from ``order`` by test-image noise.
     """
@@ -134,28 +130,6 @@ class StudyConfig:
 
 
 @dataclass(frozen=True)
-class LocalizationConfig:
-    """How test images are localized.
-
-    Attributes:
-        localizer: registered localizer name (:data:`markerplace.localization.localizer.LOCALIZERS`).
-        use_tags: tag detection in the localizer (paper's "marker detection"; off = --no-tags).
-        tag_corners: also use the tag corners as 2D-3D correspondences.
-        vlad_clusters: k-means clusters of the VLAD codebook (trained on the no-marker map).
-    """
-
-    localizer: str = setting("sift_pnp", flag="--localizer", commands=("evaluate",), choices=lambda: _localizers().names(),
-                             help=lambda: f"localizer of the test images: {_localizers().help()}",
-                             doc="a registered localizer (today one: tags + VLAD retrieval + SIFT matching + P3P "
-                                 "RANSAC + LM refinement)")
-    use_tags: bool = setting(True, flag="--no-tags", commands=("evaluate",), const=False,
-                             help="localize without tag detection (paper's parameter study)")
-    tag_corners: bool = setting(False, flag="--tag-corners", commands=("evaluate",), const=True,
-                                help="also use detected tag corners as 2D-3D matches (beyond the paper)")
-    vlad_clusters: int = 64
-
-
-@dataclass(frozen=True)
 class DiagnosticsConfig:
     """Extra analyses of an evaluation (off by default: each costs localizations).
 
@@ -164,10 +138,10 @@ class DiagnosticsConfig:
             evaluated alone on the test images, the greedy best k evaluated as a placement.
         calibration: map images localized against the rest of the map without and with each
             placement's tags, and how well the score predicts that
-            (:mod:`markerplace.testbed.calibration`).
+            (:mod:`markerplace.simulation.success_fit`).
         predicted: each placement's predicted recall under the success model plans use (fitted
             on map images unless ``expected-recall`` is evaluated, which fits it anyway) against
-            its measured recall, and the calibration error (:mod:`markerplace.testbed.predicted`).
+            its measured recall, and the calibration error (:mod:`markerplace.testbed.predicted_per_placement`).
     """
 
     ceiling: bool = setting(False, flag="--ceiling", commands=("evaluate",), const=True,

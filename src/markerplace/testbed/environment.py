@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import platform
 from importlib import metadata
+
 from markerplace.render.gl_resources import create_context
 
 log = logging.getLogger(__name__)

@@ -15,7 +15,6 @@ from markerplace.scene.raycast import RayCaster
 from markerplace.scene.types import MeshPart, Scene
 
 
-
 @pytest.fixture(scope="module")
 def house_disc(house):
     return discretize(house, DiscretizeConfig())

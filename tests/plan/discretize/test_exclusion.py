@@ -123,9 +123,9 @@ def test_exclude_that_leaves_too_few_candidates_is_refused(tiny_run, tmp_path, c
 def test_exclusion_masks_candidates_and_the_calibrations_coverages(tiny_run):
     """exclude_candidates keeps the candidate arrays, coverages, visibility and a calibrated
     method's coverages aligned (existing markers stay at the end)."""
+    from markerplace.pipelines.plan import prepare
     from markerplace.plan.discretize.exclusion import exclude_candidates
     from markerplace.plan.folder import read_plan_folder
-    from markerplace.pipelines.plan import prepare
 
     folder = read_plan_folder(tiny_run)
     data = prepare(folder.spec, folder.config, tiny_run, progress=False)  # every stage cached

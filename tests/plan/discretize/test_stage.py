@@ -9,9 +9,9 @@ import pytest
 
 from helpers.box_scenes import DOOR_Y, RECTS, TABLE, T, two_rooms
 from markerplace import geometry
+from markerplace.errors import UserError
 from markerplace.plan.discretize.artifact import load, save
 from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
-from markerplace.errors import UserError
 from markerplace.scene.types import Room, Scene
 
 

@@ -10,8 +10,8 @@ from helpers.frames import TINY_WALLS, tiny_poses
 from markerplace.geometry import Intrinsics
 from markerplace.plan.discretize.candidate_rules import CandidateConfig
 from markerplace.plan.frames.candidates import BELOW, frame_candidates, marker_poses
-from markerplace.scene import load_scene
 from markerplace.scan.simulate import distance_to_scene
+from markerplace.scene import load_scene
 from markerplace.scene.raycast import RayCaster
 
 

@@ -11,8 +11,7 @@ import pytest
 from helpers.frames import tiny_poses
 from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics
-from markerplace.plan.frames.poses import (MAX_POSES, default_frame_step, frame_indices,
-                                           plan_intrinsics, pose_fields)
+from markerplace.plan.frames.poses import MAX_POSES, default_frame_step, frame_indices, plan_intrinsics, pose_fields
 from markerplace.scan.frameset import FrameRecord, FrameSet, frame_intrinsics
 
 

@@ -12,14 +12,8 @@ import pytest
 from markerplace.errors import UserError
 from markerplace.plan.place.expected_recall import expected_localized, expected_recall_greedy
 from markerplace.plan.score.localizability import entropy
+from markerplace.plan.score.success_model import SuccessModel, calibration_curve, fit_success_model, roc_auc, sigmoid
 from markerplace.plan.types import MarkerCoverage
-from markerplace.plan.score.success_model import (
-    SuccessModel,
-    calibration_curve,
-    fit_success_model,
-    roc_auc,
-    sigmoid,
-)
 
 # --------------------------------------------------------------------------------------------
 # Success model

@@ -6,11 +6,18 @@ import numpy as np
 import pytest
 
 from markerplace.errors import UserError
-from markerplace.plan.score.localizability import information_gain
-from markerplace.plan.place.greedy import (GreedyProblem, coverage_percentages, inverted_cdf_rank, omp_greedy,
-                                          percentile_with_zeros, q_from_v, weighted_q_from_v)
-from markerplace.plan.types import MarkerCoverage
 from markerplace.plan.place.baselines import random_placement, uniform_placement
+from markerplace.plan.place.greedy import (
+    GreedyProblem,
+    coverage_percentages,
+    inverted_cdf_rank,
+    omp_greedy,
+    percentile_with_zeros,
+    q_from_v,
+    weighted_q_from_v,
+)
+from markerplace.plan.score.localizability import information_gain
+from markerplace.plan.types import MarkerCoverage
 
 
 def random_problem(rng: np.random.Generator, N: int, C: int, max_cov: int, ties: bool = False):

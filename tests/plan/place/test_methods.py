@@ -9,28 +9,21 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from helpers.recall_problems import problem
 from markerplace.errors import UserError
 from markerplace.geometry import world_from_marker_pose
 from markerplace.markers import Marker
 from markerplace.plan.config import PlanConfig, validate
+from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.config import PlacementConfig
+from markerplace.plan.place.greedy import apply_coverages, omp_greedy
+from markerplace.plan.place.methods import OMP, PLACEMENT_METHODS, Choice, PlacementMethod, get_placement_method, method_from_config
 from markerplace.plan.place.stage import place
+from markerplace.plan.score.localizability import entropy
 from markerplace.plan.types import PlanData
 from markerplace.settings import apply
-from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.methods import (
-    OMP,
-    PLACEMENT_METHODS,
-    Choice,
-    PlacementMethod,
-    get_placement_method,
-    method_from_config,
-)
-from markerplace.plan.place.baselines import random_placement, uniform_placement
-from markerplace.plan.place.greedy import apply_coverages, omp_greedy
-from markerplace.testbed import marker_sets as placements
+from markerplace.simulation import marker_sets as placements
 from markerplace.testbed import config as tbconfig
-from helpers.recall_problems import problem
 
 
 def _data(seed: int = 0, N: int = 60, C: int = 14, n_existing: int = 1) -> PlanData:
@@ -157,7 +150,7 @@ def toy_methods(monkeypatch):
 def test_a_method_registered_in_a_test_reaches_plan_and_evaluate(toy_methods, capsys):
     """Registering is all it takes: plan --method, evaluate --methods, build_placements, the size
     estimate, help texts and the report tables all see it."""
-    from markerplace.cli.evaluate import evaluate_config_from_args
+    from markerplace.cli.evaluate_command import evaluate_config_from_args
     from markerplace.cli.main import build_parser, plan_config_from_args
     from markerplace.testbed.reporting.tables import display_name, method_table
 

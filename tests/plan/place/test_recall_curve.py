@@ -10,24 +10,24 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from helpers.recall_problems import plan_data as _data
+from helpers.recall_problems import problem as _problem
+from helpers.recall_problems import success_model as _model
 from markerplace.cli.main import build_parser
 from markerplace.cli.options import plan_config_from_args
 from markerplace.errors import UserError
 from markerplace.plan.config import PlanConfig, validate
-from markerplace.plan.place.bounds import (per_pose_bound_scores, recall_upper_bound, score_upper_bound,
-                                           submodularity_sample)
 from markerplace.plan.place.config import K_ALL, PlacementConfig
 from markerplace.plan.place.expected_recall import expected_localized, expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages
-from markerplace.plan.place.predicted import (HOW_TO_GET, place_for_target, predicted_recall,
-                                              score_bound, wants_success_model)
+from markerplace.plan.place.predicted_recall import HOW_TO_GET, place_for_target, predicted_recall, score_bound, wants_success_model
 from markerplace.plan.place.recall_curve import knee, recall_curve, target_count
 from markerplace.plan.place.stage import place
+from markerplace.plan.place.upper_bounds import per_pose_bound_scores, recall_upper_bound, score_upper_bound, submodularity_sample
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.success_model import SuccessModel
 from markerplace.plan.types import MarkerCoverage
 from markerplace.report.recall_section import recall_section
-from helpers.recall_problems import plan_data as _data, problem as _problem, success_model as _model
 
 
 def test_curve_is_expected_recall_of_each_prefix():

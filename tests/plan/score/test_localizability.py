@@ -7,21 +7,8 @@ import numpy as np
 import pytest
 
 from helpers.poses import facing_marker
-from markerplace.geometry import (
-    Intrinsics,
-    so3_exp,
-    world_from_cam_pose,
-    world_from_cam_poses,
-)
-from markerplace.plan.score.localizability import (
-    ENTROPY_CONST,
-    NoiseConfig,
-    entropy,
-    information_gain,
-    marker_visibility,
-    pose_information,
-    score,
-)
+from markerplace.geometry import Intrinsics, so3_exp, world_from_cam_pose, world_from_cam_poses
+from markerplace.plan.score.localizability import ENTROPY_CONST, NoiseConfig, entropy, information_gain, marker_visibility, pose_information, score
 
 INTR = Intrinsics()
 K = INTR.K

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from markerplace.plan.similarity.config import SimilarityConfig
-from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 from markerplace.plan.similarity.quality import measure_error, synthetic_descriptors
+from markerplace.plan.similarity.stage import count_similar, count_similar_exact, count_similar_ivf
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,7 @@ from markerplace.errors import UserError
 from markerplace.plan.discretize.stage import DiscretizeConfig, discretize
 from markerplace.scene import load_scene
 from markerplace.scene.builtin.catalogue import get_layout, list_scenes
-from markerplace.scene.builtin.corridor import (CELL, MIN_ROOMS, ROOM_DEPTH, ROOMS, SMALL_NAME, SMALL_ROOMS, build_corridor,
-                                                corridor_plan, room_name)
+from markerplace.scene.builtin.corridor import CELL, MIN_ROOMS, ROOM_DEPTH, ROOMS, SMALL_NAME, SMALL_ROOMS, build_corridor, corridor_plan, room_name
 from markerplace.scene.builtin.walls import door_span
 
 CORRIDOR_XY = (5.0, ROOM_DEPTH + 0.9)  # a point in the corridor

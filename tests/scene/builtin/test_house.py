@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from markerplace.geometry import world_from_cam_pose
-from markerplace.scene.raycast import RayCaster
 from markerplace.scene import load_scene
 from markerplace.scene.builtin.catalogue import list_scenes
 from markerplace.scene.export import export_glb
+from markerplace.scene.raycast import RayCaster
 
 DOWN, UP = np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 1.0])
 

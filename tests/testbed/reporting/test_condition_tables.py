@@ -1,8 +1,14 @@
 """Recall tables with query conditions: the condition column and tables appear only when a
 non-clean condition is in the rows; clean rows print as before."""
 
-from markerplace.testbed.reporting.tables import (CSV_COLUMNS, conditions_table, main_tables_markdown,
-                                                  read_recall_csv, tables_markdown, write_recall_csv)
+from markerplace.testbed.reporting.tables import (
+    CSV_COLUMNS,
+    conditions_table,
+    main_tables_markdown,
+    read_recall_csv,
+    tables_markdown,
+    write_recall_csv,
+)
 
 
 def _rows(conditions):

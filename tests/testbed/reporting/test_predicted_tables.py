@@ -6,8 +6,7 @@ import csv
 
 import pytest
 
-from markerplace.testbed.reporting.predicted import (calibration_errors, error_summary, predicted_markdown,
-                                                     predicted_rows, write_predicted_csv)
+from markerplace.testbed.reporting.predicted_tables import calibration_errors, error_summary, predicted_markdown, predicted_rows, write_predicted_csv
 
 MAIN = "5cm/5deg"
 

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.errors import UserError
-from markerplace.settings import OCCUPANCY_CELL, setting
+from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.scene.raycast import RayCaster
 from markerplace.scene.semantics import CATEGORIES, PartKind, classify
+from markerplace.settings import OCCUPANCY_CELL, setting
 
 __all__ = ["ALLOWABLE", "GEOMETRIC", "RULES", "CandidateConfig", "SurfaceLabels", "rule_words", "surface_shape",
            "tag_fits"]

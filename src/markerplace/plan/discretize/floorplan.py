@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.grid import Grid
 from markerplace.plan.discretize.storeys import FloorConfig, Surfaces
+from markerplace.scene.raycast import RayCaster
 
 __all__ = ["StoreyFloor", "storey_floor", "eye_level_support"]
 

@@ -39,21 +39,22 @@ import numpy as np
 from markerplace import geometry
 from markerplace.errors import UserError
 from markerplace.markers import DEFAULT_TAG_SIZE
-from markerplace.runtime import cache
-from markerplace.runtime.cache import config_dict
-from markerplace.runtime.stages import cached
-from markerplace.settings import OCCUPANCY_CELL, setting
-from markerplace.validation import parse_level as _parse_level
-from markerplace.validation import parse_xy as _parse_xy
-from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.discretize.artifact import load as load_discretization
 from markerplace.plan.discretize.artifact import save as save_discretization
+from markerplace.plan.discretize.candidate_rules import RULES, CandidateConfig, SurfaceLabels, rule_words
 from markerplace.plan.discretize.floorplan import eye_level_support, storey_floor
 from markerplace.plan.discretize.freespace import Sections, StoreySpace, camera_locations, free_space, obstacle_mask, open_fractions
 from markerplace.plan.discretize.grid import Grid
 from markerplace.plan.discretize.storeys import FloorConfig, cast_columns, find_storeys
-from markerplace.plan.discretize.wall_candidates import RULES, CandidateConfig, SurfaceLabels, rule_words, wall_candidates
+from markerplace.plan.discretize.wall_candidates import wall_candidates
+from markerplace.runtime import cache
+from markerplace.runtime.cache import config_dict
+from markerplace.runtime.stages import cached
+from markerplace.scene.raycast import RayCaster
+from markerplace.settings import OCCUPANCY_CELL, setting
+from markerplace.validation import parse_level as _parse_level
+from markerplace.validation import parse_xy as _parse_xy
 
 log = logging.getLogger(__name__)
 
@@ -258,7 +259,7 @@ def discretize(scene, config: DiscretizeConfig = DiscretizeConfig(),
     cand_storey = np.asarray(slots, np.int64)[cand.storey] if len(cand.storey) else np.zeros(0, np.int64)
     cT = np.stack([geometry.world_from_marker_pose(p, q) for p, q in zip(cand.position, cand.normal)])
 
-    for (s, floor, open_floor, space, xy, z) in spaces:
+    for (s, _floor, open_floor, space, xy, _z) in spaces:
         info = _storey_report(s, storeys[s], grid, open_floor, space, xy, int((cand_storey == s).sum()), cfg)
         summary["per_storey"].append(info)
     r = cand.removed
@@ -350,7 +351,7 @@ def _check_start(start: np.ndarray, grid: Grid, per_storey: list, cfg: Discretiz
         raise UserError(f"--start {txt} is outside the model (no floor below it on the planned storey(s)); "
                         "pick a point in open floor space")
 
-    for _, floor, support, obstacle in on_floor:
+    for _, _floor, support, obstacle in on_floor:
         free0 = support & ~obstacle
         if free0[r[0], c[0]] and distance_transform_edt(free0)[r[0], c[0]] * grid.res >= min(cfg.passage_radius, 0.15):
             return

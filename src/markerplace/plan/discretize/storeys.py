@@ -32,8 +32,8 @@ from typing import Callable
 
 import numpy as np
 
-from markerplace.scene.raycast import RayCaster
 from markerplace.plan.discretize.grid import Grid
+from markerplace.scene.raycast import RayCaster
 
 log = logging.getLogger(__name__)
 

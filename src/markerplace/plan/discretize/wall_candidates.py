@@ -52,19 +52,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from markerplace.plan.discretize.candidate_rules import (ALLOWABLE, GEOMETRIC, RULES, CandidateConfig, SurfaceLabels, rule_words, surface_shape,
-                              tag_fits)
+from markerplace.markers import DEFAULT_TAG_SIZE
+from markerplace.plan.discretize.candidate_rules import ALLOWABLE, GEOMETRIC, RULES, CandidateConfig, SurfaceLabels, surface_shape, tag_fits
 from markerplace.plan.discretize.floorplan import StoreyFloor
 from markerplace.plan.discretize.grid import Grid
 from markerplace.plan.discretize.spacing import space_out as _space_out
 from markerplace.scene.raycast import RayCaster
-from markerplace.markers import DEFAULT_TAG_SIZE
 from markerplace.scene.semantics import CATEGORIES, PartKind
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ALLOWABLE", "CandidateConfig", "RULES", "SurfaceLabels", "WallCandidates", "wall_candidates", "tag_fits",
-           "surface_shape", "rule_words"]
+__all__ = ["WallCandidates", "wall_candidates"]
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,7 +22,7 @@ they apply (:mod:`markerplace.plan.discretize.wall_candidates`).
    and the mesh plan's geometric rules pass
    (:func:`~markerplace.plan.discretize.candidate_rules.surface_shape`: ``off-wall``, a surface
    standing off the wall such as a cupboard front or a picture, and ``in-opening``; unless
-   ``allow`` names them), with the floor of :func:`~markerplace.plan.frames.layout.floor_height`.
+   ``allow`` names them), with the floor of :func:`~markerplace.plan.frames.top_view.floor_height`.
 
 The name rules (doors, windows, pictures, glass...) need part names; a fused surface has none,
 so they do not apply.

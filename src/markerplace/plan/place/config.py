@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from markerplace.markers import DEFAULT_TAG_SIZE
-from markerplace.plan.place.registry import PLACEMENT_METHODS, method_settings
+from markerplace.plan.place.method_registry import PLACEMENT_METHODS, method_settings
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.settings import SEED_MAX, setting
 
@@ -39,14 +39,14 @@ class PlacementConfig:
             nested method (``omp``, ``expected-recall``). None: place ``k`` tags.
         recall_curve: fit the success model for any method, so that ``report.html`` and
             ``placement.json`` show the predicted recall against k (calibration renders and
-            localizes the map images: :func:`markerplace.testbed.calibration.calibrate_plan`).
+            localizes the map images: :func:`markerplace.simulation.success_fit.calibrate_plan`).
             Always on with ``expected-recall`` or ``target_recall``.
         recall_model: the calibrated method (a
             :class:`~markerplace.plan.place.methods.CalibratedMethod`) whose fitted success model
             predicts the recall of every plan (the recall curve, ``target_recall``,
             ``evaluate --predicted``).
         methods: each registered method's own settings (its ``Config``), by method name with
-            ``-`` as ``_`` (:func:`~markerplace.plan.place.registry.method_settings`): the one
+            ``-`` as ``_`` (:func:`~markerplace.plan.place.method_registry.method_settings`): the one
             home of OMP's ``v``, ``expected-recall``'s ``calibration_poses``, ... In a
             ``--config`` file the table ``[placement.methods.omp]``; on the command line
             ``--method-conf KEY=VALUE`` (and the flags a method's fields carry, ``-v``,

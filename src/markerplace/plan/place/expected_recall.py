@@ -28,11 +28,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from markerplace.plan.score.localizability import entropy
-from markerplace.plan.place.greedy import apply_coverages, GreedyProblem, PlacementResult, check_k
+from markerplace.plan.place.greedy import GreedyProblem, PlacementResult, apply_coverages, check_k
 from markerplace.plan.place.recall_curve import NEGLIGIBLE
-from markerplace.plan.types import MarkerCoverage
+from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.success_model import SuccessModel
+from markerplace.plan.types import MarkerCoverage
 
 log = logging.getLogger(__name__)
 

@@ -37,17 +37,17 @@ from typing import ClassVar
 
 import numpy as np
 
-from markerplace.plan.place.registry import PLACEMENT_METHODS, settings_name
-from markerplace.registry import configure
-from markerplace.settings import SEED_MAX, setting
-from markerplace.plan.place.human import HumanConfig, human_placement
+from markerplace.errors import UserError
 from markerplace.plan.place.baselines import random_placement, uniform_placement
 from markerplace.plan.place.config import PlacementConfig
+from markerplace.plan.place.expected_recall import expected_recall_greedy
 from markerplace.plan.place.greedy import apply_coverages, omp_greedy
+from markerplace.plan.place.human import HumanConfig, human_placement
+from markerplace.plan.place.method_registry import PLACEMENT_METHODS, settings_name
 from markerplace.plan.score.marker_models import MARKER_MODELS
 from markerplace.plan.types import PlanData
-from markerplace.errors import UserError
-from markerplace.plan.place.expected_recall import expected_recall_greedy
+from markerplace.registry import configure
+from markerplace.settings import SEED_MAX, setting
 
 log = logging.getLogger(__name__)
 
@@ -288,7 +288,7 @@ CALIBRATION_POSES = ("map", "offgrid")
 
 @dataclass(frozen=True)
 class CalibrationConfig:
-    """The settings of a success-model fit (:func:`markerplace.testbed.calibration.calibrate_plan`
+    """The settings of a success-model fit (:func:`markerplace.simulation.success_fit.calibrate_plan`
     reads these fields, and only these, of a :class:`CalibratedMethod`'s ``Config``).
 
     Attributes:
@@ -313,7 +313,7 @@ class CalibrationConfig:
 
 class CalibratedMethod(PlacementMethod):
     """Base class of a method that places with a success model fitted on the map images: before
-    it places, :func:`markerplace.testbed.calibration.calibrate_plan` fits the model with the
+    it places, :func:`markerplace.simulation.success_fit.calibrate_plan` fits the model with the
     :class:`CalibrationConfig` fields of its ``Config`` (a subclass of it) and stores it in
     ``data.calibration[name]`` (``model``, a :class:`~markerplace.plan.score.success_model.SuccessModel`,
     and ``coverages`` under ``tag_model``), where :meth:`fit` finds it. Any calibrated method can
@@ -332,7 +332,7 @@ class CalibratedMethod(PlacementMethod):
         fit = data.calibration.get(self.name)
         if fit is None:
             raise UserError(f"--method {self.name} needs the calibration stage: run it through `markerplace plan` or "
-                            "`markerplace evaluate` (markerplace.testbed.calibration.calibrate_plan)")
+                            "`markerplace evaluate` (markerplace.simulation.success_fit.calibrate_plan)")
         return fit
 
 
@@ -342,7 +342,7 @@ class ExpectedRecall(CalibratedMethod):
     localize, ``sum_p P(success | s_p)`` (:func:`~markerplace.plan.place.expected_recall.expected_recall_greedy`),
     with ``P`` a logistic :class:`~markerplace.plan.score.success_model.SuccessModel` of the score fitted
     on the scene's own map images, each localized against the rest of the map without and with
-    seeded random tag sets (:func:`markerplace.testbed.calibration.calibrate_plan`: map images
+    seeded random tag sets (:func:`markerplace.simulation.success_fit.calibrate_plan`: map images
     only, never test images). Plain greedy (the objective is not submodular); deterministic.
     With a ``target`` it stops once the expected share of poses that localize reaches it, or when
     no candidate adds anything."""

@@ -36,6 +36,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+
 from markerplace.plan.score.landmark_kernel import landmark_information_sums
 
 log = logging.getLogger(__name__)

@@ -30,8 +30,8 @@ from typing import ClassVar
 import numpy as np
 
 from markerplace.geometry import invert, marker_corners_local
-from markerplace.registry import Registry, configure
 from markerplace.plan.score.localizability import NoiseConfig, gram, whitened_jacobians
+from markerplace.registry import Registry, configure
 
 log = logging.getLogger(__name__)
 

@@ -15,12 +15,12 @@ from typing import Sequence
 
 import numpy as np
 
+from markerplace.geometry import Intrinsics
 from markerplace.imaging.features import FeatureSet
 from markerplace.plan.discretize.artifact import Discretization
 from markerplace.plan.score.localizability import NoiseConfig, entropy, marker_visibility, pose_information
 from markerplace.plan.score.marker_models import get_marker_model
 from markerplace.plan.types import MarkerCoverage, PlanData
-from markerplace.geometry import Intrinsics
 
 log = logging.getLogger(__name__)
 

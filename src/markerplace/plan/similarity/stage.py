@@ -57,12 +57,12 @@ import faiss
 import numpy as np
 
 from markerplace.plan.similarity.config import SimilarityConfig
+from markerplace.plan.similarity.join import Cells, expand_search, join_cells
+from markerplace.plan.similarity.search import BAND, Pairs, Searcher, faiss_threads
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
 from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime.stages import cached
-from markerplace.plan.similarity.join import Cells, expand_search, join_cells
-from markerplace.plan.similarity.search import BAND, Pairs, Searcher, faiss_threads
 
 log = logging.getLogger(__name__)
 

@@ -11,10 +11,12 @@ import numpy as np
 
 # every format module registers its class on import, in the order the files are listed; a new
 # format is one more line here
-from markerplace.report.tagmaps import wpilib  # noqa: F401  (isort: skip)
+# isort: off
+from markerplace.report.tagmaps import wpilib  # noqa: F401
 from markerplace.report.tagmaps import apriltag_ros  # noqa: F401
 from markerplace.report.tagmaps import tagslam  # noqa: F401
 from markerplace.report.tagmaps import ros2  # noqa: F401
+# isort: on
 from markerplace.report.tagmaps.format import TAG_MAP_FORMATS, TagMapContext
 from markerplace.runtime.atomic_io import atomic_path
 

@@ -22,10 +22,10 @@ from __future__ import annotations
 import functools
 
 from markerplace.errors import UserError
-from markerplace.scene.builtin.layout import Building, Layout
 from markerplace.scene.builtin.campus import build_campus, campus_plan
 from markerplace.scene.builtin.corridor import SMALL_NAME, build_corridor, build_small_corridor, corridor_plan, small_corridor_plan
 from markerplace.scene.builtin.house import build_house, house_plan
+from markerplace.scene.builtin.layout import Building, Layout
 from markerplace.scene.builtin.procedural import build_scene
 from markerplace.scene.builtin.spec_loader import load_layout
 from markerplace.scene.types import Scene

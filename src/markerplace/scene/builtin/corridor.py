@@ -43,7 +43,7 @@ import logging
 from dataclasses import replace
 
 from markerplace.errors import UserError
-from markerplace.scene.builtin.layout import Door, Layout
+from markerplace.scene.builtin.layout import Layout
 from markerplace.scene.builtin.procedural import build_scene
 from markerplace.scene.builtin.spec_loader import SpecError, build_door, build_room, check_keys, read_spec
 from markerplace.scene.types import Scene

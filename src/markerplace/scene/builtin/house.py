@@ -69,8 +69,8 @@ from markerplace.scene.builtin.layout import Building, Door, Layout
 from markerplace.scene.builtin.meshkit import Material, MeshBuilder, add_box
 from markerplace.scene.builtin.procedural import add_layout, layout_rooms, wall_material
 from markerplace.scene.builtin.spec_loader import build_layout, check_keys, read_spec
-from markerplace.scene.types import Scene
 from markerplace.scene.builtin.walls import add_slab_edges, door_span
+from markerplace.scene.types import Scene
 
 log = logging.getLogger(__name__)
 

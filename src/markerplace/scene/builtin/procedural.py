@@ -30,8 +30,8 @@ from markerplace.scene.builtin import textures as tx
 from markerplace.scene.builtin.furniture import FLOORS, FURNITURE, MAX_FREE_HEIGHT, TALL_AGAINST_WALL, palette, texture_fns
 from markerplace.scene.builtin.layout import OPENING_KINDS, Layout, RoomSpec
 from markerplace.scene.builtin.meshkit import Material, MeshBuilder, add_box
-from markerplace.scene.types import Room, Scene
 from markerplace.scene.builtin.walls import build_openings, build_walls, door_gaps, opening_spans, round_line
+from markerplace.scene.types import Room, Scene
 
 __all__ = ["add_layout", "build_scene", "layout_rooms", "subtract_rects", "validate_layout", "wall_material"]
 

@@ -34,13 +34,25 @@ file and the entry. Numbers are read as written: a float in a file is the float 
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Any
 
+import tomllib
+
 from markerplace.scene.builtin.furniture import FURNITURE
-from markerplace.scene.builtin.layout import (Door, Item, Layout, Opening, OPENING_KINDS, Picture, RoomSpec, chairs_around,
-                                              desk_cluster, wall_item, workstation)
+from markerplace.scene.builtin.layout import (
+    OPENING_KINDS,
+    Door,
+    Item,
+    Layout,
+    Opening,
+    Picture,
+    RoomSpec,
+    chairs_around,
+    desk_cluster,
+    wall_item,
+    workstation,
+)
 
 __all__ = ["SPEC_DIR", "SpecError", "build_door", "build_layout", "build_room", "check_keys", "load_layout", "read_spec",
            "spec_names"]

@@ -218,7 +218,7 @@ def book_spines(rng: np.random.Generator, width: int = 256, height: int = 512, r
         dtype=float,
     )
     for r in range(rows):
-        top, bottom = r * row_h, (r + 1) * row_h - 6
+        bottom = (r + 1) * row_h - 6
         x = 4
         while x < width - 8:
             w = int(rng.integers(6, 18))

@@ -3,9 +3,9 @@
 The map of a placement is its map images (``real`` frames or ``render`` images, :mod:`.images`)
 with its tags in them, each image's features from the :class:`~.store.FeatureStore`, the map
 poses, the placement's markers and the VLAD codebook of the marker-free map
-(:func:`markerplace.testbed.maps.save_map`, one folder per placement and map kind, named by the
+(:func:`markerplace.simulation.maps.save_map`, one folder per placement and map kind, named by the
 hash of its contents). Queries are localized by the registered localizer on the executor
-(:func:`markerplace.testbed.maps.localize_task`), their estimates stored per (map, query kind)
+(:func:`markerplace.simulation.maps.localize_task`), their estimates stored per (map, query kind)
 as ``.npz`` so that a rerun reuses them.
 """
 
@@ -24,8 +24,8 @@ from markerplace.markers import Marker
 from markerplace.progress import progress_bar
 from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.runtime.cache import hash_of
+from markerplace.simulation.maps import localize_task, save_map
 from markerplace.testbed.frames.store import FeatureStore, image_key
-from markerplace.testbed.maps import localize_task, save_map
 
 log = logging.getLogger(__name__)
 

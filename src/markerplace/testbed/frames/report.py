@@ -19,8 +19,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from markerplace.testbed import metrics
-from markerplace.testbed.marker_sets import NO_MARKERS
+from markerplace.simulation import metrics
+from markerplace.simulation.marker_sets import NO_MARKERS
 from markerplace.testbed.reporting.paired import bootstrap_difference, format_difference, paired_markdown
 from markerplace.testbed.reporting.tables import display_name, method_table, thresholds_table
 

@@ -24,7 +24,7 @@ from markerplace.progress import progress_bar
 from markerplace.runtime import run_folder
 from markerplace.runtime.atomic_io import write_npz
 from markerplace.runtime.cache import hash_of
-from markerplace.testbed.frames.images import image_task
+from markerplace.testbed.frames.frame_features import image_task
 
 log = logging.getLogger(__name__)
 

@@ -1,5 +1,5 @@
 """``evaluate --calibration`` outputs: how well the localizability score predicts whether a map
-image localizes (leave-one-location-out, :mod:`markerplace.testbed.calibration`), per marker
+image localizes (leave-one-location-out, :mod:`markerplace.simulation.success_fit`), per marker
 model.
 
 * ``calibration.md``: per marker model, the samples (map images without tags, and with each
@@ -18,15 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.plan.score.success_model import calibration_curve, fit_success_model, roc_auc
+from markerplace.runtime.atomic_io import atomic_path, write_npz
 from markerplace.testbed.reporting.tables import md_text
 
 __all__ = ["write_calibration_report"]
 
 
 def write_calibration_report(out: Path, scene_name: str, outcomes: dict, bins: int = 10) -> dict:
-    """Write the three outputs into ``out`` from :func:`markerplace.testbed.calibration.score_outcomes`'s
+    """Write the three outputs into ``out`` from :func:`markerplace.simulation.success_fit.score_outcomes`'s
     result; returns, per model, its AUCs and fitted model (as JSON-ready dicts)."""
     out = Path(out)
     summary, arrays, curves = {}, {}, {}

@@ -25,14 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, png_file_uri, png_uri, table, write_page
 from markerplace.plan.discretize.artifact import load as load_disc
 from markerplace.render.renderer import Renderer
+from markerplace.report.html import esc, img, jpeg_uri, markdown_to_html, png_file_uri, png_uri, table, write_page
 from markerplace.scene.worldframe import world_offset
-from markerplace.testbed import metrics
-from markerplace.testbed.conditions import CLEAN
-from markerplace.testbed.marker_sets import NO_MARKERS, RESERVED_NAMES, baseline_methods
-from markerplace.testbed.metrics import hit_mask, pose_errors_batch
+from markerplace.simulation import metrics
+from markerplace.simulation.conditions import CLEAN
+from markerplace.simulation.marker_sets import NO_MARKERS, RESERVED_NAMES, baseline_methods
+from markerplace.simulation.metrics import hit_mask, pose_errors_batch
 
 log = logging.getLogger(__name__)
 
@@ -204,10 +204,10 @@ def write_evaluation_report(out: str | Path, scene_name: str, placements, predic
     Args:
         out: the run folder.
         scene_name: label of the page.
-        placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
+        placements: the evaluated :class:`~markerplace.simulation.marker_sets.PlacementRun` list.
         predictions: ``(method, run, k, test set) -> (N, 4, 4)`` estimated ``world_from_cam``
             (all NaN where localization failed).
-        test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
+        test_poses: test set -> :class:`~markerplace.simulation.pose_sampling.TestPoses` (truth).
         config: the :class:`~markerplace.testbed.config.EvaluateConfig`.
         camera: :class:`~markerplace.geometry.Intrinsics` of the test images.
         scene: the scene (internal frame) to render the gallery; None = gallery without images.

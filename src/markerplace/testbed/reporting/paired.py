@@ -25,8 +25,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from markerplace.testbed.conditions import CLEAN, set_name, split_set
-from markerplace.testbed.marker_sets import NO_MARKERS, baseline_methods
+from markerplace.simulation.conditions import CLEAN, set_name, split_set
+from markerplace.simulation.marker_sets import NO_MARKERS, baseline_methods
 from markerplace.testbed.reporting.tables import md_name
 
 
@@ -79,7 +79,7 @@ def paired_differences(hits: Mapping[tuple[str, int, int], np.ndarray], ks: Sequ
         hits: (method, run, k) -> (n,) bool, the test images localized within the threshold;
             all arrays index the same test images. Candidates are the methods other than
             ``none`` and the baselines (the randomized placement methods,
-            :func:`~markerplace.testbed.marker_sets.baseline_methods`).
+            :func:`~markerplace.simulation.marker_sets.baseline_methods`).
         ks: marker budgets to compare.
         n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 
@@ -216,7 +216,7 @@ def condition_differences(hits_by_set: Mapping[str, Mapping[tuple[str, int, int]
 
     Args:
         hits_by_set: image set name (``weighted``, ``weighted@blur``:
-            :func:`~markerplace.testbed.conditions.set_name`) -> (method, run, k) -> (n,) bool hits
+            :func:`~markerplace.simulation.conditions.set_name`) -> (method, run, k) -> (n,) bool hits
             at the threshold; a condition's set holds the same test images as its clean set.
         n_boot, seed: bootstrap settings (:func:`bootstrap_difference`).
 

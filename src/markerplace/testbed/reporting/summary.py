@@ -2,7 +2,7 @@
 differences, fixed/broken counts, recall vs k, per-query errors.
 
 Predictions (the estimated pose of every test image, per placement and test set) are stored
-apart from these metrics (:mod:`markerplace.testbed.prediction_store`), so the tables can be
+apart from these metrics (:mod:`markerplace.simulation.prediction_store`), so the tables can be
 recomputed with other thresholds without localizing again.
 """
 
@@ -12,17 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.report.figures import recall_vs_k
-from markerplace.runtime.atomic_io import write_json, write_npz
+from markerplace.runtime.atomic_io import atomic_path, write_json, write_npz
 from markerplace.runtime.cache import config_dict
-from markerplace.testbed import metrics
-from markerplace.testbed.conditions import set_name, split_set
+from markerplace.simulation import metrics
+from markerplace.simulation.conditions import set_name, split_set
 from markerplace.testbed.environment import environment
 from markerplace.testbed.reporting.page import write_evaluation_report
-from markerplace.testbed.reporting.predicted import (error_summary, log_predicted, predicted_markdown, predicted_rows,
-                                                    write_predicted_csv)
 from markerplace.testbed.reporting.paired import condition_markdown, paired_differences, paired_markdown, paired_table
+from markerplace.testbed.reporting.predicted_tables import error_summary, log_predicted, predicted_markdown, predicted_rows, write_predicted_csv
 from markerplace.testbed.reporting.tables import main_tables_markdown, recall_curves, tables_markdown, write_recall_csv
 
 __all__ = ["write_outputs"]
@@ -37,20 +35,20 @@ def write_outputs(out: Path, scene_name: str, placements, predictions: dict, tes
     Args:
         out: the run folder.
         scene_name: scene label of the tables.
-        placements: the evaluated :class:`~markerplace.testbed.marker_sets.PlacementRun` list.
+        placements: the evaluated :class:`~markerplace.simulation.marker_sets.PlacementRun` list.
         predictions: ``(method, run, k, image set) -> (N, 4, 4)`` estimated ``world_from_cam``
             per test image (all NaN where localization failed); an image set is a test set
-            under a query condition (:func:`~markerplace.testbed.conditions.set_name`): rows,
+            under a query condition (:func:`~markerplace.simulation.conditions.set_name`): rows,
             tables and ``query_errors.npz``'s ``<image set>_*`` arrays are per image set.
-        test_poses: test set -> :class:`~markerplace.testbed.poses.TestPoses` (truth).
+        test_poses: test set -> :class:`~markerplace.simulation.pose_sampling.TestPoses` (truth).
         base_score: (M,) localizability score of each feasible pose without markers.
         where: the ``--where`` file as read (GeoJSON), recorded in config.json; None: none.
         config, plan_config: the evaluate and plan settings.
         scene: the scene (internal frame), to render report.html's gallery (None: no images).
         predicted: ``evaluate --predicted``: (test set, method, run, k) -> (predicted,
-            predicted on the drawn poses) (:func:`markerplace.testbed.predicted.predict_recalls`):
+            predicted on the drawn poses) (:func:`markerplace.testbed.predicted_per_placement.predict_recalls`):
             adds ``predicted.csv``, a section of tables.md and report.html, log lines and the
-            calibration error to the summary (:mod:`markerplace.testbed.reporting.predicted`);
+            calibration error to the summary (:mod:`markerplace.testbed.reporting.predicted_tables`);
             None: none of it (every output as without the option).
 
     Returns:

@@ -2,12 +2,12 @@
 
 A *recall row* is a dict with the ``recall.csv`` columns :data:`CSV_COLUMNS`:
 ``scene, method, run, k, test_set, threshold, recall, n_tests`` where ``threshold`` is a label
-such as ``5cm/5deg`` (see :func:`markerplace.testbed.metrics.threshold_label`), ``recall`` is a
+such as ``5cm/5deg`` (see :func:`markerplace.simulation.metrics.threshold_label`), ``recall`` is a
 fraction in [0, 1] and the method ``none`` (no markers) has ``k = 0``. A row may also carry
-``condition``, the query condition (:mod:`markerplace.testbed.conditions`; ``clean`` when
+``condition``, the query condition (:mod:`markerplace.simulation.conditions`; ``clean`` when
 absent); ``recall.csv`` has a ``condition`` column (after ``test_set``) only when some row's
 condition is not ``clean``, and the tables then key each test set by condition
-(``weighted@blur``, :func:`~markerplace.testbed.conditions.set_name`) and add a table of
+(``weighted@blur``, :func:`~markerplace.simulation.conditions.set_name`) and add a table of
 recall per condition.
 
 Markdown tables print recall in percent. Methods are listed in registry order
@@ -26,10 +26,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from markerplace.runtime.atomic_io import atomic_path
 from markerplace.plan.place.methods import PLACEMENT_METHODS
-from markerplace.testbed.conditions import CLEAN, set_name, split_set
-from markerplace.testbed.marker_sets import NO_MARKERS
+from markerplace.runtime.atomic_io import atomic_path
+from markerplace.simulation.conditions import CLEAN, set_name, split_set
+from markerplace.simulation.marker_sets import NO_MARKERS
 
 CSV_COLUMNS = ("scene", "method", "run", "k", "test_set", "threshold", "recall", "n_tests")
 #: ``recall.csv``'s columns when some row has a query condition other than ``clean``.
