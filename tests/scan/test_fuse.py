@@ -14,7 +14,8 @@ from PIL import Image
 
 from markerplace.cli.main import main
 from markerplace.geometry import Intrinsics, project
-from markerplace.scan.frames import FrameWriter, load_frame, open_frameset
+from markerplace.scan.frame_images import load_frame
+from markerplace.scan.frames import FrameWriter, open_frameset
 from markerplace.scan.frameset import rotation_from_quaternion
 from markerplace.scan.fuse import read_ahead
 from markerplace.scan.simulate import distance_to_scene

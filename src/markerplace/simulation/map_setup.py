@@ -17,8 +17,9 @@ from typing import Sequence
 import numpy as np
 
 from markerplace.errors import UserError
-from markerplace.imaging.config import SIFT_DEFAULT, renders_alike
+from markerplace.imaging.config import renders_alike
 from markerplace.localization.localizer import LocalizerSettings
+from markerplace.localization.sift import SIFT_DEFAULT
 from markerplace.localization.vlad import VladCodebook
 from markerplace.plan.observe import MapOutput
 from markerplace.runtime import cache
