@@ -34,6 +34,7 @@ from markerplace.errors import UserError
 from markerplace.geometry import Intrinsics, invert
 from markerplace.progress import track
 from markerplace.runtime.atomic_io import atomic_path
+from markerplace.runtime.heap import keep_freed_memory
 from markerplace.scan.frame_images import load_frame
 from markerplace.scan.frameset import FrameSet, frame_intrinsics
 from markerplace.scan.up import MESH_REFINE_DEG, UP_SOURCE_CAMERAS, angle_deg, estimate_up_from_mesh, world_from_input
@@ -261,6 +262,7 @@ def fuse_frameset(fs, config: FuseConfig = FuseConfig(), progress: bool = True):
                         "fusion needs depth")
     if no_depth:
         log.warning("%d of %d frames have no depth image and are skipped", no_depth, len(frames))
+    keep_freed_memory()  # decoded frames reuse the heap (markerplace.runtime.heap)
     fusion = TSDFFusion(fs.intrinsics, config)
     t0 = time.perf_counter()
     empty = 0

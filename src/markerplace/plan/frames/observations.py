@@ -28,6 +28,7 @@ from markerplace.localization.sift import extract_sift, lift_to_3d
 from markerplace.progress import progress_bar
 from markerplace.runtime import cache
 from markerplace.runtime.executor import RuntimeConfig, WorkerJob, make_executor
+from markerplace.runtime.heap import keep_freed_memory
 from markerplace.runtime.stages import cached
 from markerplace.scan.frame_images import load_frame
 
@@ -51,7 +52,9 @@ def frame_features(rgb: np.ndarray, depth_m: np.ndarray, world_from_cam: np.ndar
 
 
 def _frame_state(spec: tuple):
-    """A worker's state: (the frame set, (C, 5, 3) candidate samples, ImagingConfig), as given."""
+    """A worker's state: (the frame set, (C, 5, 3) candidate samples, ImagingConfig), as given;
+    freed memory kept for the next frame (:func:`markerplace.runtime.heap.keep_freed_memory`)."""
+    keep_freed_memory()
     return spec
 
 
