@@ -5,7 +5,8 @@ Prints ``name: value`` lines.
 
 * the model: ``--scene NAME-scan`` is ``scene export NAME --as-scan`` (a fused simulated scan of
   the built-in NAME, cached in ``--work`` as ``NAME_scan.ply``), planned with ``--up z``; any
-  other value is passed to ``plan`` as is (a built-in name or a mesh file). The floor area comes
+  other value is passed to ``plan`` as is (``frames:DIR``: ``plan --frames DIR``, e.g. the 7-Scenes
+  kitchen with ``--baseline-args``/``--current-args`` ``"--tag-size 0.16 --marker-spacing 0.5"``) (a built-in name or a mesh file). The floor area comes
   from the discretization summary (``open_floor_m2`` summed over storeys).
 * the baseline: ``git archive BASELINE src`` unpacked in ``--work`` and put first on
   ``PYTHONPATH`` of its ``plan`` process (same interpreter, same packages); the current code is
@@ -54,7 +55,10 @@ GOAL_OBJECTIVE = 0.01
 
 
 def scene_args(scene: str, work: Path) -> list[str]:
-    """``plan`` arguments of ``scene`` (exports ``NAME-scan`` once into ``work``)."""
+    """``plan`` arguments of ``scene`` (exports ``NAME-scan`` once into ``work``; ``frames:DIR`` is
+    ``--frames DIR``, a real RGB-D sequence)."""
+    if scene.startswith("frames:"):
+        return ["--frames", scene[len("frames:"):]]
     if not scene.endswith("-scan"):
         return [scene]
     name = scene[: -len("-scan")]
