@@ -28,6 +28,7 @@ from contextlib import contextmanager
 from multiprocessing import resource_tracker
 from typing import Callable, Iterator
 
+from markerplace.runtime.heap import keep_freed_memory
 from markerplace.runtime.interrupt import deferred
 
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "LP_NUM_THREADS": "0"}
@@ -42,10 +43,12 @@ def default_workers(requested: int = 0, cap: int = 4) -> int:
 
 
 def single_threaded_libraries() -> None:
-    """Call in a worker: one OpenCV thread (BLAS threads are fixed by the spawn environment)."""
+    """Call in a worker: one OpenCV thread (BLAS threads are fixed by the spawn environment), and
+    freed memory kept for the next image (:func:`markerplace.runtime.heap.keep_freed_memory`)."""
     import cv2
 
     cv2.setNumThreads(1)
+    keep_freed_memory()
 
 
 @contextmanager
