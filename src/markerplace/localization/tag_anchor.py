@@ -6,8 +6,9 @@ transform (``model_from_solver = planned @ inv(recovered)``), so every tag is tr
 hypothesis (RANSAC over all minimal sets); a tag *agrees* with a transform when it lands within
 ``tol_m`` of its planned centre and within ``tol_deg`` of its planned orientation (the full
 rotation: a tag turned on its wall disagrees). The hypothesis with most agreeing tags (ties: the
-least summed centre error) is refined by a least-squares rigid fit (Kabsch) to the four corners
-of every agreeing tag, and agreement is checked again until it no longer changes. A tag hung
+least summed centre error) is refined by a robust rigid fit to the four corners of every agreeing
+tag (Kabsch, iteratively reweighted with Cauchy weights of scale :data:`CAUCHY_M` per tag), and
+agreement is checked again until it no longer changes. A tag hung
 wrong is an outlier and does not move the frame; the tags that anchor it are reported.
 """
 
@@ -22,6 +23,10 @@ from markerplace.geometry import invert, marker_corners_local
 __all__ = ["Anchor", "anchor_to_plan", "rotation_deg"]
 
 MAX_REFINE = 10
+CAUCHY_M = 0.01
+"""Scale of the Cauchy weights of the refinement, metres: a tag hung 2 cm off (within the
+tolerance, so it agrees) weighs a fifth of one hung to the millimetre, so it barely tilts the frame."""
+IRLS_STEPS = 10
 
 
 @dataclass(frozen=True)
@@ -54,10 +59,11 @@ def _agree(M: np.ndarray, recovered: dict, planned: dict, tol_m: float, tol_deg:
     return sorted(out)
 
 
-def _kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """(4, 4) rigid ``T`` minimising sum |T src - dst|^2 over (n, 3) point pairs."""
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
+def _kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(4, 4) rigid ``T`` minimising sum w |T src - dst|^2 over (n, 3) point pairs, (n,) weights."""
+    w = w / w.sum()
+    cs, cd = w @ src, w @ dst
+    U, _, Vt = np.linalg.svd((src - cs).T @ ((dst - cd) * w[:, None]))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     T = np.eye(4)
@@ -70,9 +76,15 @@ def _corners(T: np.ndarray, size: float) -> np.ndarray:
 
 
 def _fit(ids, recovered, planned, sizes):
+    """Cauchy-weighted least squares over the tags' corners (:data:`CAUCHY_M`), by iteratively
+    reweighted Kabsch; (transform, unweighted corner RMS)."""
     src = np.vstack([_corners(recovered[t], sizes[t]) for t in ids])
     dst = np.vstack([_corners(planned[t], sizes[t]) for t in ids])
-    M = _kabsch(src, dst)
+    w = np.ones(len(ids))
+    for _ in range(IRLS_STEPS):
+        M = _kabsch(src, dst, np.repeat(w, 4))
+        r = np.linalg.norm(src @ M[:3, :3].T + M[:3, 3] - dst, axis=1).reshape(len(ids), 4).mean(axis=1)
+        w = 1.0 / (1.0 + (r / CAUCHY_M) ** 2)
     rms = float(np.sqrt(np.mean(np.sum((src @ M[:3, :3].T + M[:3, 3] - dst) ** 2, axis=1))))
     return M, rms
 

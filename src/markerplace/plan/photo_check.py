@@ -106,25 +106,54 @@ class PhotoSurvey:
         return [Marker(t, size_of(t), self.tags[t].world_from_marker) for t in sorted(self.tags) if self.tags[t].measured]
 
 
-def _looked_at(cam: np.ndarray, K: np.ndarray, wh: tuple, T: np.ndarray, size: float, caster) -> bool:
+def _area(corners: np.ndarray) -> float:
+    """Area of a quadrilateral's (4, 2) corners, pixels^2 (half the cross product of its diagonals)."""
+    a, b = corners[2] - corners[0], corners[3] - corners[1]
+    return 0.5 * abs(float(a[0] * b[1] - a[1] * b[0]))
+
+
+def _in_view(cam: np.ndarray, K: np.ndarray, wh: tuple, T: np.ndarray, size: float) -> np.ndarray | None:
+    """The points to check for a clear line of sight ((5, 3): the tag's corners and centre) when
+    the spot ``T`` is in the photo's view (facing it, inside the image, large enough), else None."""
     corners = marker_corners_local(size) @ T[:3, :3].T + T[:3, 3]
     to_cam = cam[:3, 3] - T[:3, 3]
     dist = float(np.linalg.norm(to_cam))
     if dist < 1e-6 or np.degrees(np.arccos(np.clip(to_cam @ T[:3, 2] / dist, -1, 1))) > MAX_VIEW_DEG:
-        return False
+        return None
     q = (corners - cam[:3, 3]) @ cam[:3, :3]
     if np.any(q[:, 2] <= 0.05):
-        return False
+        return None
     uv = (q @ K.T)[:, :2] / q[:, 2:]
     if np.any(uv < 0) or np.any(uv[:, 0] > wh[0] - 1) or np.any(uv[:, 1] > wh[1] - 1):
-        return False
+        return None
     if np.linalg.norm(uv[1] - uv[0]) < MIN_EDGE_PX or np.linalg.norm(uv[3] - uv[0]) < MIN_EDGE_PX:
-        return False
-    targets = np.vstack([corners, T[:3, 3][None]])
-    d = targets - cam[:3, 3]
-    n = np.linalg.norm(d, axis=1)
-    t, _ = caster.first_hits(np.repeat(cam[None, :3, 3], len(d), axis=0), d / n[:, None], n + 1.0)
-    return bool(np.all(t >= n - 0.05))
+        return None
+    return np.vstack([corners, T[:3, 3][None]])
+
+
+def _looked_at(spots: list, cameras: dict, Ks: dict, sizes: dict, caster) -> dict:
+    """{tag id: photos in ``cameras`` that looked at its planned spot (module docstring, 4.)};
+    ``spots``: [(tag id, (4, 4) world_from_marker)]; one batch of rays for all."""
+    origins, targets, owner = [], [], []
+    for t, T in spots:
+        for p, C in cameras.items():
+            pts = _in_view(C, Ks[p][0], Ks[p][1], T, sizes[t])
+            if pts is not None:
+                origins.append(np.repeat(C[None, :3, 3], len(pts), axis=0))
+                targets.append(pts)
+                owner += [(t, p)] * len(pts)
+    out = {t: 0 for t, _ in spots}
+    if not owner:
+        return out
+    o, q = np.vstack(origins), np.vstack(targets)
+    n = np.linalg.norm(q - o, axis=1)
+    hit, _ = caster.first_hits(o, (q - o) / n[:, None], n + 1.0)
+    clear = {}
+    for k, key in enumerate(owner):
+        clear[key] = clear.get(key, True) and bool(hit[k] >= n[k] - 0.05)
+    for (t, _), ok in clear.items():
+        out[t] += int(ok)
+    return out
 
 
 def survey(detections: list, intrinsics: list, planned: list, existing: list, default_size: float, *,
@@ -180,7 +209,7 @@ def survey(detections: list, intrinsics: list, planned: list, existing: list, de
     out = {}
     for t in sorted({d.tag_id for d in dets}):
         mine = [d for d in dets if d.tag_id == t]
-        best = max(mine, key=lambda d: abs(float(np.cross(d.corners[2] - d.corners[0], d.corners[3] - d.corners[1]))))
+        best = max(mine, key=lambda d: _area(d.corners))
         n_photos = len(sol.photos_seen.get(t, [])) or len({d.photo for d in mine})
         if t not in tags:
             out[t] = PhotoTag(t, None, None, None, n_photos, (best.photo, best.corners), False,
@@ -195,13 +224,10 @@ def survey(detections: list, intrinsics: list, planned: list, existing: list, de
             reason = (f"uncertain by {100 * pos:.1f} cm / {rot:.1f} deg (over {100 * tol_m:.0f} cm / {tol_deg:.0f} "
                       "deg): take closer photos from other angles")
         out[t] = PhotoTag(t, tags[t], pos, rot, n_photos, (best.photo, best.corners), not reason, reason)
-    looked = {}
-    for m in planned:
-        if int(m.tag_id) in out and out[int(m.tag_id)].measured:
-            continue  # only the spots without a measured tag need it
-        T = np.asarray(m.world_from_marker, float)
-        looked[int(m.tag_id)] = sum(
-            _looked_at(C, Ks[p], (intrinsics[p].width, intrinsics[p].height), T, m.size, caster) for p, C in cameras.items())
+    spots = [(int(m.tag_id), np.asarray(m.world_from_marker, float)) for m in planned
+             if not (int(m.tag_id) in out and out[int(m.tag_id)].measured)]  # only these need it
+    views = {p: (Ks[p], (intrinsics[p].width, intrinsics[p].height)) for p in cameras}
+    looked = _looked_at(spots, cameras, views, {t: float(known[t].size) for t, _ in spots}, caster)
     no_tags = [p for p, ds in enumerate(detections) if not ds]
     return PhotoSurvey(out, cameras, anchors, looked, sorted(unplaced), no_tags, sol.rms_px)
 

@@ -71,7 +71,8 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
                      "score_lost": r.score_lost, "score_lost_seen": r.score_lost_seen,
                      "planned_position": None if P is None else P[:3, 3].tolist(),
                      "installed_position": None if Q is None else Q[:3, 3].tolist(),
-                     "installed_normal": None if Q is None else Q[:3, 2].tolist(), "move": r.move, "note": r.note})
+                     "installed_normal": None if Q is None else Q[:3, 2].tolist(),
+                     "installed_world_from_marker": None if Q is None else Q.tolist(), "move": r.move, "note": r.note})
         if photos is not None:
             mz = r.measured or {}
             rows[-1].update({k: mz.get(k) for k in ("position_std_m", "rotation_std_deg", "photos", "photo")})

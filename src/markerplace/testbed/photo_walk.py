@@ -39,8 +39,8 @@ NEIGHBOURS = 3
 """Each tag is paired with this many nearest tags."""
 
 ERROR_SETS = {
-    "mixed": [("shift", 0, 0.30, 0.0), ("shift", 1, 0.0, 0.02), ("turn", 2, 90.0), ("turn", 3, 180.0),
-              ("swap", 4, 5), ("missing", 6), ("extra", 40)],
+    "mixed": [("shift", 0, 0.30, 0.0), ("shift", 2, 0.0, 0.02), ("turn", 3, 90.0), ("turn", 4, 180.0),
+              ("swap", 5, 6), ("missing", 7), ("extra", 40)],
     "small": [("shift", 0, 0.05, 0.06), ("shift", 1, -0.10, 0.0), ("shift", 2, 0.0, -0.03), ("extra", 41)],
     "turned": [("turn", 0, 180.0), ("turn", 1, -90.0), ("swap", 2, 3), ("missing", 4), ("shift", 5, 0.15, -0.10)],
 }
