@@ -119,7 +119,7 @@ def test_bad_photo_inputs_are_one_line(plan, tmp_path, capsys, case, needle):
 
     photos = tmp_path / "photos"
     photos.mkdir()
-    argv = ["check", str(plan), "--photos", str(photos), "--out", str(tmp_path / "out")]
+    argv = ["--quiet", "check", str(plan), "--photos", str(photos), "--out", str(tmp_path / "out")]
     if case != "empty":
         Image.new("RGB", (320, 240), (200, 200, 200)).save(photos / "a.jpg")
     if case == "blank":
