@@ -67,3 +67,11 @@ def test_empty_or_missing_folder(tmp_path):
         list_photos(tmp_path)
     with pytest.raises(UserError, match="no such folder"):
         list_photos(tmp_path / "absent")
+
+
+def test_a_frame_folder_is_read_by_its_layout_reader(tiny_frames):
+    """An RGB-D frame folder: its own cameras (no EXIF needed), its images as the reader loads them."""
+    photos = list_photos(tiny_frames)
+    assert len(photos) == 40 and len({p.key for p in photos}) == 40
+    rgb = load_photo(photos[0])
+    assert rgb.shape == (photos[0].intrinsics.height, photos[0].intrinsics.width, 3)
