@@ -4,8 +4,10 @@ poses the solver is not told, under the query conditions. The truth for ``check 
 
 Error sets (:data:`ERROR_SETS`) are lists of operations on the planned tags by placement order
 (0-based): ``("shift", i, right_m, up_m)`` moves tag ``i`` along its wall (as you face it),
+``("shift", ...)`` goes the other way when the given way would put its paper over a neighbour's;
 ``("turn", i, deg)`` turns it on its wall (counter-clockwise as you face it), ``("swap", i, j)``
-exchanges two tags' ids, ``("missing", i)`` leaves it out and ``("extra", tag_id)`` hangs an
+exchanges two tags' ids (``swapped``, or ``shifted`` when the two spots are within the check's
+match radius: a tag with the spot's id within it is that spot's tag), ``("missing", i)`` leaves it out and ``("extra", tag_id)`` hangs an
 unplanned tag on the free candidate spot farthest from every planned tag. Each comes with the
 status ``check`` must give.
 
@@ -24,8 +26,10 @@ import numpy as np
 
 from markerplace.geometry import Intrinsics, marker_corners_local
 from markerplace.markers import Marker
+from markerplace.plan.check import MATCH_RADIUS_M
 from markerplace.render.renderer import Renderer
 from markerplace.scene.raycast import RayCaster
+from markerplace.tagfamily import outer_size
 from markerplace.testbed.conditions import CONDITIONS as CONDITION_TYPES, ImageCondition, degrade_render
 
 __all__ = ["ERROR_SETS", "PHONE", "CONDITIONS", "hang", "photo_poses", "take_photos"]
@@ -33,6 +37,8 @@ __all__ = ["ERROR_SETS", "PHONE", "CONDITIONS", "hang", "photo_poses", "take_pho
 PHONE = Intrinsics.from_fov(1024, 768, 66.0)
 """A phone's main camera (66 deg across, 4:3), at a resolution the tests can afford."""
 CONDITIONS = ("blur", "noise", "exposure")
+MAX_OBLIQUE_DEG = 65.0
+"""A photo shows a tag when it is within this angle of the tag's normal."""
 PAIR_VIEWS = 2
 """Views per pair of neighbouring tags."""
 NEIGHBOURS = 3
@@ -75,8 +81,13 @@ def hang(planned: list[Marker], ops: list, free_spots: np.ndarray) -> tuple[list
     extra = []
     for op in ops:
         kind, i = op[0], op[1]
-        if kind == "shift":
-            poses[i] = _turned(poses[i], op[2], op[3], 0.0)
+        if kind == "shift":  # away from a neighbour its paper would cover, if the given way does
+            others = [T[:3, 3] for j, T in poses.items() if j != i]
+            for sign in (1.0, -1.0):
+                moved = _turned(poses[i], sign * op[2], sign * op[3], 0.0)
+                if all(np.linalg.norm(moved[:3, 3] - c) > outer_size(planned[i].size) for c in others):
+                    break
+            poses[i] = moved
             status[i + 1] = "shifted" if np.hypot(op[2], op[3]) > 0.05 else "as planned"
         elif kind == "turn":
             poses[i] = _turned(poses[i], 0.0, 0.0, op[2])
@@ -84,7 +95,8 @@ def hang(planned: list[Marker], ops: list, free_spots: np.ndarray) -> tuple[list
         elif kind == "swap":
             j = op[2]
             ids[i], ids[j] = ids[j], ids[i]
-            status[i + 1] = status[j + 1] = "swapped"
+            near = np.linalg.norm(poses[i][:3, 3] - poses[j][:3, 3]) <= MATCH_RADIUS_M
+            status[i + 1] = status[j + 1] = "shifted" if near else "swapped"  # check's pairing: its id within the radius
         elif kind == "missing":
             poses.pop(i)
             status[i + 1] = "missing"
@@ -123,7 +135,7 @@ def _sees(caster, T: np.ndarray, tags: list[np.ndarray], size: float, intr: Intr
         if np.any(uv < margin) or np.any(uv[:, 0] > intr.width - margin) or np.any(uv[:, 1] > intr.height - margin):
             return False
         to_cam = T[:3, 3] - M[:3, 3]
-        if to_cam @ M[:3, 2] < 0.5 * np.linalg.norm(to_cam):  # over 60 deg off the normal
+        if to_cam @ M[:3, 2] < np.cos(np.radians(MAX_OBLIQUE_DEG)) * np.linalg.norm(to_cam):
             return False
         d = np.vstack([corners, M[:3, 3][None]]) - T[:3, 3]
         n = np.linalg.norm(d, axis=1)
