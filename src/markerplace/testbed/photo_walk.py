@@ -12,7 +12,8 @@ unplanned tag on the free candidate spot farthest from every planned tag. Each c
 status ``check`` must give.
 
 Photos (:func:`photo_poses`): per hung tag and per missing spot two off-axis views 1.3-2 m in
-front of it; for each tag and its :data:`NEIGHBOURS` nearest neighbours (within 4 m, not facing each other) two
+front of it; for each tag and its :data:`NEIGHBOURS` nearest neighbours (within :data:`PAIR_RANGE_M`, not
+facing each other), and along a minimum spanning tree of all tags, two
 views (:data:`PAIR_VIEWS`) that show both (what links the photos into one solve); each in free space with a clear line of sight, at
 1.3-1.7 m, a few degrees of roll. Every photo gets one of the query conditions blur, noise and
 exposure in turn (:func:`markerplace.testbed.conditions.degrade_render`).
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import networkx as nx
 import numpy as np
 
 from markerplace.geometry import Intrinsics, marker_corners_local
@@ -42,7 +44,9 @@ MAX_OBLIQUE_DEG = 65.0
 PAIR_VIEWS = 2
 """Views per pair of neighbouring tags."""
 NEIGHBOURS = 3
-"""Each tag is paired with this many nearest tags."""
+"""Each tag is paired with this many nearest tags (and along a minimum spanning tree of all)."""
+PAIR_RANGE_M = 6.0
+"""Tags farther apart are not photographed together."""
 
 ERROR_SETS = {
     "mixed": [("shift", 0, 0.30, 0.0), ("shift", 2, 0.0, 0.02), ("turn", 3, 90.0), ("turn", 4, 180.0),
@@ -164,18 +168,20 @@ def photo_poses(scene, targets: list[np.ndarray], size: float, rng: np.random.Ge
                     out.append(T)
                     break
     P = np.array([M[:3, 3] for M in targets])
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
     pairs = set()
     for a, A in enumerate(targets):
-        near = [b for b in np.argsort(np.linalg.norm(P - P[a], axis=1)) if b != a
-                and np.linalg.norm(P[b] - P[a]) <= 4.0 and A[:3, 2] @ targets[b][:3, 2] >= -0.2]
+        near = [b for b in np.argsort(D[a]) if b != a and D[a, b] <= PAIR_RANGE_M and A[:3, 2] @ targets[b][:3, 2] >= -0.2]
         pairs.update(tuple(sorted((a, int(b)))) for b in near[:NEIGHBOURS])
+    tree = nx.minimum_spanning_tree(nx.from_numpy_array(D))  # a chain through every tag, where one can be seen
+    pairs.update(tuple(sorted(e)) for e in tree.edges if D[e] <= PAIR_RANGE_M)
     for a, b in sorted(pairs):
         A, B = targets[a], targets[b]
         mid = (A[:3, 3] + B[:3, 3]) / 2
         n = A[:3, 2] + B[:3, 2]
         n /= np.linalg.norm(n)
         found = 0
-        for dist in (1.2, 1.5, 2.0, 2.5, 3.0, 3.5):
+        for dist in (1.2, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0):
             for ang in np.radians([-20.0, 20.0, 0.0, -40.0, 40.0]):
                 c, s_ = np.cos(ang), np.sin(ang)
                 eye = mid + dist * np.array([c * n[0] - s_ * n[1], s_ * n[0] + c * n[1], n[2]])
