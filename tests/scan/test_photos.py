@@ -75,3 +75,11 @@ def test_a_frame_folder_is_read_by_its_layout_reader(tiny_frames):
     assert len(photos) == 40 and len({p.key for p in photos}) == 40
     rgb = load_photo(photos[0])
     assert rgb.shape == (photos[0].intrinsics.height, photos[0].intrinsics.width, 3)
+
+
+def test_photos_under_the_output_folder_are_not_photos(tmp_path):
+    _jpeg(tmp_path / "a.jpg", **{"0xA405": 26})
+    (tmp_path / "check" / "photos").mkdir(parents=True)
+    _jpeg(tmp_path / "check" / "photos" / "tag_1.jpg", **{"0xA405": 26})
+    assert [p.name for p in list_photos(tmp_path)] == ["a.jpg", "check/photos/tag_1.jpg"]
+    assert [p.name for p in list_photos(tmp_path, exclude=tmp_path / "check")] == ["a.jpg"]

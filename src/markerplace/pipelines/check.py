@@ -68,8 +68,8 @@ def run_check(plan_dir: str | Path, installed_path: str | Path | None = None, ou
     folder = read_plan_folder(plan_dir)
     size = folder.config.placement.tag_size
     installed_user = load_installed(installed_path, size) if photos is None else None
-    shots = list_photos(photos, intrinsics) if photos is not None else None
     out = Path(out_dir) if out_dir is not None else folder.path / "check"
+    shots = list_photos(photos, intrinsics, exclude=out) if photos is not None else None
     if os.path.realpath(out) == os.path.realpath(folder.path):
         raise UserError(f"--out {out} is the plan folder itself: check writes its own tagmaps/ (the tags as "
                         "installed) and would replace the plan's; give another folder (default PLAN_DIR/check)")

@@ -138,8 +138,10 @@ def _image_size(path: Path) -> tuple[int, int]:
     return w, h
 
 
-def list_photos(root: str | Path, intrinsics_path: str | Path | None = None) -> list[Photo]:
-    """The photos of ``root`` (module docstring), sorted by name.
+def list_photos(root: str | Path, intrinsics_path: str | Path | None = None, exclude: str | Path | None = None
+                ) -> list[Photo]:
+    """The photos of ``root`` (module docstring), sorted by name; none under ``exclude`` (the
+    output folder, whose drawn detections are PNGs too).
 
     Raises:
         UserError: no such folder, no photo in it, a photo without a usable camera.
@@ -153,7 +155,9 @@ def list_photos(root: str | Path, intrinsics_path: str | Path | None = None) -> 
         fmt = None
     if fmt is not None:
         return _frame_photos(open_frameset(root, fmt, intrinsics_path))
-    files = sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in PHOTO_SUFFIXES)
+    skip = Path(exclude).resolve() if exclude is not None else None
+    files = sorted(p for p in root.rglob("*") if p.is_file() and p.suffix.lower() in PHOTO_SUFFIXES
+                   and not (skip is not None and p.resolve().is_relative_to(skip)))
     if not files:
         raise UserError(f"--photos {root}: no JPEG or PNG photo in it (nor an RGB-D frame folder)")
     fixed = read_intrinsics(Path(intrinsics_path), 1000.0)[0] if intrinsics_path is not None else None
