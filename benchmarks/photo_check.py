@@ -50,7 +50,7 @@ def run(scene: str, sets: list[str], out: Path) -> list[dict]:
     cands = load(plan / "discretization.npz").candidate_world_from_marker
     rows = []
     for name in sets:
-        hung, status, truth = photo_walk.hang(planned, photo_walk.ERROR_SETS[name], cands)
+        hung, status, truth = photo_walk.hang(planned, photo_walk.ERROR_SETS[name], cands, world)
         spots = [m.world_from_marker for m in hung] + [planned[o - 1].world_from_marker for o, s in status.items()
                                                         if s == "missing"]
         poses = photo_walk.photo_poses(world, spots, planned[0].size, np.random.default_rng(0))

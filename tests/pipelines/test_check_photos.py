@@ -38,7 +38,7 @@ def walk(plan, tmp_path_factory):
     scene = folder.spec.load()
     planned = list(folder.markers)
     hung, status, truth = photo_walk.hang(planned, photo_walk.ERROR_SETS["mixed"],
-                                          load(plan / "discretization.npz").candidate_world_from_marker)
+                                          load(plan / "discretization.npz").candidate_world_from_marker, scene)
     spots = [m.world_from_marker for m in hung] + [planned[o - 1].world_from_marker for o, s in status.items()
                                                     if s == "missing"]
     poses = photo_walk.photo_poses(scene, spots, planned[0].size, np.random.default_rng(0))

@@ -4,7 +4,8 @@ poses the solver is not told, under the query conditions. The truth for ``check 
 
 Error sets (:data:`ERROR_SETS`) are lists of operations on the planned tags by placement order
 (0-based): ``("shift", i, right_m, up_m)`` moves tag ``i`` along its wall (as you face it),
-``("shift", ...)`` goes the other way when the given way would put its paper over a neighbour's;
+``("shift", ...)`` goes the other way when the given way would put its paper over a neighbour's
+or off its wall;
 ``("turn", i, deg)`` turns it on its wall (counter-clockwise as you face it), ``("swap", i, j)``
 exchanges two tags' ids (``swapped``, or ``shifted`` when the two spots are within the check's
 match radius: a tag with the spot's id within it is that spot's tag), ``("missing", i)`` leaves it out and ``("extra", tag_id)`` hangs an
@@ -67,13 +68,24 @@ def _turned(T: np.ndarray, right: float, up: float, deg: float) -> np.ndarray:
     return out
 
 
-def hang(planned: list[Marker], ops: list, free_spots: np.ndarray) -> tuple[list[Marker], dict, dict]:
+def _on_wall(caster, T: np.ndarray, edge: float) -> bool:
+    """The paper of a tag at ``T`` (outer edge ``edge``, metres) lies flat on a wall: behind each
+    of its corners, 10 cm in front of it, the wall is 10 cm away."""
+    h = edge / 2
+    corners = np.array([[-h, -h, 0.1], [h, -h, 0.1], [h, h, 0.1], [-h, h, 0.1]]) @ T[:3, :3].T + T[:3, 3]
+    t, _ = caster.first_hits(corners, np.repeat(-T[None, :3, 2], 4, axis=0), 0.5)
+    return bool(np.all(np.abs(t - 0.1) < 0.02))
+
+
+def hang(planned: list[Marker], ops: list, free_spots: np.ndarray, scene=None) -> tuple[list[Marker], dict, dict]:
     """The tags as hung.
 
     Args:
         planned: the plan's markers in placement order.
         ops: an error set (module docstring).
         free_spots: (C, 4, 4) candidate ``world_from_marker`` poses (for an extra tag).
+        scene: when given, a shift goes the other way when the given way would not leave the
+            paper flat on its wall (a corner, a door).
 
     Returns:
         (hung markers, {placement order (1-based): expected status}, {tag_id: true
@@ -82,6 +94,7 @@ def hang(planned: list[Marker], ops: list, free_spots: np.ndarray) -> tuple[list
     poses = {i: np.asarray(m.world_from_marker, float) for i, m in enumerate(planned)}
     ids = {i: int(m.tag_id) for i, m in enumerate(planned)}
     status = {i + 1: "as planned" for i in range(len(planned))}
+    caster = RayCaster(*scene.geometry()) if scene is not None else None
     extra = []
     for op in ops:
         kind, i = op[0], op[1]
@@ -89,7 +102,8 @@ def hang(planned: list[Marker], ops: list, free_spots: np.ndarray) -> tuple[list
             others = [T[:3, 3] for j, T in poses.items() if j != i]
             for sign in (1.0, -1.0):
                 moved = _turned(poses[i], sign * op[2], sign * op[3], 0.0)
-                if all(np.linalg.norm(moved[:3, 3] - c) > outer_size(planned[i].size) for c in others):
+                if all(np.linalg.norm(moved[:3, 3] - c) > outer_size(planned[i].size) for c in others) and (
+                        caster is None or _on_wall(caster, moved, outer_size(planned[i].size))):
                     break
             poses[i] = moved
             status[i + 1] = "shifted" if np.hypot(op[2], op[3]) > 0.05 else "as planned"
