@@ -4,8 +4,8 @@ poses the solver is not told, under the query conditions. The truth for ``check 
 
 Error sets (:data:`ERROR_SETS`) are lists of operations on the planned tags by placement order
 (0-based): ``("shift", i, right_m, up_m)`` moves tag ``i`` along its wall (as you face it),
-``("shift", ...)`` goes the other way when the given way would put its paper over a neighbour's
-or off its wall;
+``("shift", ...)`` goes another way (mirrored, or only up or down) when the given way would put
+its paper over a neighbour's or off its wall;
 ``("turn", i, deg)`` turns it on its wall (counter-clockwise as you face it), ``("swap", i, j)``
 exchanges two tags' ids (``swapped``, or ``shifted`` when the two spots are within the check's
 match radius: a tag with the spot's id within it is that spot's tag), ``("missing", i)`` leaves it out and ``("extra", tag_id)`` hangs an
@@ -100,13 +100,16 @@ def hang(planned: list[Marker], ops: list, free_spots: np.ndarray, scene=None) -
         kind, i = op[0], op[1]
         if kind == "shift":  # away from a neighbour its paper would cover, if the given way does
             others = [T[:3, 3] for j, T in poses.items() if j != i]
-            for sign in (1.0, -1.0):
-                moved = _turned(poses[i], sign * op[2], sign * op[3], 0.0)
+            r, u = op[2], op[3]
+            for dr, du in ((r, u), (-r, -u), (r, -u), (-r, u), (0.0, u), (0.0, -u), (0.0, r), (0.0, -r)):
+                if np.hypot(dr, du) == 0.0 and np.hypot(r, u) > 0.0:
+                    continue
+                moved = _turned(poses[i], dr, du, 0.0)
                 if all(np.linalg.norm(moved[:3, 3] - c) > outer_size(planned[i].size) for c in others) and (
                         caster is None or _on_wall(caster, moved, outer_size(planned[i].size))):
                     break
             poses[i] = moved
-            status[i + 1] = "shifted" if np.hypot(op[2], op[3]) > 0.05 else "as planned"
+            status[i + 1] = "shifted" if np.linalg.norm(moved[:3, 3] - planned[i].position) > 0.05 else "as planned"
         elif kind == "turn":
             poses[i] = _turned(poses[i], 0.0, 0.0, op[2])
             status[i + 1] = "shifted"
