@@ -75,6 +75,7 @@ def run(scene: str, sets: list[str], out: Path) -> list[dict]:
                 Q, T = np.array(r["installed_world_from_marker"]), truth[r["installed_id"]]
                 dpos.append(100 * float(np.linalg.norm(Q[:3, 3] - T[:3, 3])))
                 drot.append(rotation_deg(Q, T))
+        dpos, drot = dpos or [np.nan], drot or [np.nan]  # nothing measured
         rows.append({"scene": scene, "set": name, "photos": len(poses), "right": right, "rows": len(report["tags"]),
                      "not_measured": sum(r["status"] == "not measured" for r in report["tags"]),
                      "pos_med": float(np.median(dpos)), "pos_p90": float(np.percentile(dpos, 90)),
@@ -110,7 +111,8 @@ def cli() -> None:
     ok = [r for r in rows if "error" not in r]
     if ok:
         print(f"\nall runs: statuses right {sum(r['right'] for r in ok)} / {sum(r['rows'] for r in ok)}, worst position "
-              f"error {max(r['pos_max'] for r in ok):.2f} cm, worst rotation error {max(r['rot_max'] for r in ok):.2f} "
+              f"error {np.nanmax([r['pos_max'] for r in ok]):.2f} cm, worst rotation error "
+              f"{np.nanmax([r['rot_max'] for r in ok]):.2f} "
               f"deg, {np.median([r['s_per_photo'] for r in ok]):.2f} s per photo (median)")
 
 
