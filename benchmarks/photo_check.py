@@ -64,7 +64,8 @@ def run(scene: str, sets: list[str], out: Path) -> list[dict]:
                      str(work / "phone.json"), "--out", str(work / "check")])
         seconds = time.perf_counter() - t0
         if code != 0:
-            rows.append({"scene": scene, "set": name, "photos": len(poses), "error": f"exit {code}"})
+            rows.append({"scene": scene, "set": name, "photos": len(poses), "error": f"exit {code} (the error above)"})
+            print(_line(rows[-1]), flush=True)
             continue
         report = json.loads((work / "check" / "check.json").read_text())
         expected = {**{o: s for o, s in status.items()}, **{None: "extra"}}
