@@ -16,7 +16,8 @@
 4. a planned spot whose tag no photo measured is ``missing`` only when at least
    :data:`MIN_PHOTOS` placed photos looked at it (the spot's four corners in the image, facing
    the camera, at least :data:`MIN_EDGE_PX` pixels across, nothing in front of it in the model)
-   and saw nothing there; else ``not measured``, with a line saying to photograph it.
+   and none of them detected any tag there; else ``not measured`` (a tag another photo could not
+   measure may hang there), with a line saying to photograph it.
 
 Everything is in the internal frame (:mod:`markerplace.scene.worldframe`), metres.
 """
@@ -26,6 +27,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from markerplace.errors import UserError
@@ -48,6 +50,9 @@ ANCHOR_SIGMA_M = 0.005
 that over the tag size, radians): the gauge of the uncertainties (the anchoring tags' own
 uncertainty is about this)."""
 MAX_VIEW_DEG = 70.0
+OCCUPIED_SCALE = 1.5
+"""A detection whose centre falls in the spot's image quad scaled by this about its centre is a
+tag at the spot (in the wall's plane: foreshortened as the spot is)."""
 """... and the camera is within this angle of the tag's normal."""
 
 
@@ -85,8 +90,8 @@ class PhotoSurvey:
         tags: {tag_id: :class:`PhotoTag`}.
         cameras: {photo index: (4, 4) world_from_cam (internal frame)} of the placed photos.
         anchors: per placed set of photos, the ids of the tags that anchor it.
-        looked_at: {planned tag id: placed photos that looked at its spot}, for the spots whose
-            tag was not measured.
+        looked_at: {planned tag id: placed photos that looked at its spot and saw no tag there;
+            -1 when one saw a tag there}, for the spots whose tag was not measured.
         unplaced_photos: photos with tags whose set could not be placed; ``no_tags``: photos
             without any tag.
         rms_px: RMS corner reprojection error of the solve, pixels.
@@ -128,21 +133,28 @@ def _in_view(cam: np.ndarray, K: np.ndarray, wh: tuple, T: np.ndarray, size: flo
         return None
     if np.linalg.norm(uv[1] - uv[0]) < MIN_EDGE_PX or np.linalg.norm(uv[3] - uv[0]) < MIN_EDGE_PX:
         return None
-    return np.vstack([corners, T[:3, 3][None]])
+    return np.vstack([corners, T[:3, 3][None]]), uv
 
 
-def _looked_at(spots: list, cameras: dict, Ks: dict, sizes: dict, caster) -> dict:
-    """{tag id: photos in ``cameras`` that looked at its planned spot (module docstring, 4.)};
-    ``spots``: [(tag id, (4, 4) world_from_marker)]; one batch of rays for all."""
-    origins, targets, owner = [], [], []
+def _looked_at(spots: list, cameras: dict, Ks: dict, sizes: dict, caster, detections: list) -> dict:
+    """{tag id: photos in ``cameras`` that looked at its planned spot and saw no tag there
+    (module docstring, 4.), or -1 when a photo saw some tag there}; ``spots``: [(tag id, (4, 4)
+    world_from_marker)]; ``detections``: per photo its detections. One batch of rays for all."""
+    origins, targets, owner, occupied = [], [], [], set()
     for t, T in spots:
         for p, C in cameras.items():
-            pts = _in_view(C, Ks[p][0], Ks[p][1], T, sizes[t])
-            if pts is not None:
-                origins.append(np.repeat(C[None, :3, 3], len(pts), axis=0))
-                targets.append(pts)
-                owner += [(t, p)] * len(pts)
-    out = {t: 0 for t, _ in spots}
+            seen = _in_view(C, Ks[p][0], Ks[p][1], T, sizes[t])
+            if seen is None:
+                continue
+            pts, uv = seen
+            quad = (uv.mean(axis=0) + OCCUPIED_SCALE * (uv - uv.mean(axis=0))).astype(np.float32)
+            if any(cv2.pointPolygonTest(quad, tuple(float(v) for v in np.asarray(d.corners).mean(axis=0)), False) >= 0
+                   for d in detections[p]):
+                occupied.add(t)  # a tag is there in this photo: whatever it is, the spot is not empty
+            origins.append(np.repeat(C[None, :3, 3], len(pts), axis=0))
+            targets.append(pts)
+            owner += [(t, p)] * len(pts)
+    out = {t: -1 if t in occupied else 0 for t, _ in spots}
     if not owner:
         return out
     o, q = np.vstack(origins), np.vstack(targets)
@@ -152,7 +164,8 @@ def _looked_at(spots: list, cameras: dict, Ks: dict, sizes: dict, caster) -> dic
     for k, key in enumerate(owner):
         clear[key] = clear.get(key, True) and bool(hit[k] >= n[k] - 0.05)
     for (t, _), ok in clear.items():
-        out[t] += int(ok)
+        if t not in occupied:
+            out[t] += int(ok)
     return out
 
 
@@ -227,7 +240,7 @@ def survey(detections: list, intrinsics: list, planned: list, existing: list, de
     spots = [(int(m.tag_id), np.asarray(m.world_from_marker, float)) for m in planned
              if not (int(m.tag_id) in out and out[int(m.tag_id)].measured)]  # only these need it
     views = {p: (Ks[p], (intrinsics[p].width, intrinsics[p].height)) for p in cameras}
-    looked = _looked_at(spots, cameras, views, {t: float(known[t].size) for t, _ in spots}, caster)
+    looked = _looked_at(spots, cameras, views, {t: float(known[t].size) for t, _ in spots}, caster, detections)
     no_tags = [p for p, ds in enumerate(detections) if not ds]
     return PhotoSurvey(out, cameras, anchors, looked, sorted(unplaced), no_tags, sol.rms_px)
 
@@ -237,7 +250,11 @@ def guidance(s: PhotoSurvey, planned: list) -> list[str]:
     more views, photos not placed."""
     lines = []
     planned_ids = [int(m.tag_id) for m in planned]
-    unseen = [t for t in planned_ids if t not in s.tags and s.looked_at.get(t, 0) < MIN_PHOTOS]
+    unseen = [t for t in planned_ids if t not in s.tags and 0 <= s.looked_at.get(t, 0) < MIN_PHOTOS]
+    other = [t for t in planned_ids if t not in s.tags and s.looked_at.get(t, 0) < 0]
+    if other:
+        lines.append(f"the spot(s) of planned tag(s) {', '.join(map(str, other))} show another tag that could not be "
+                     "measured: photograph it from closer, with a neighbouring tag in view")
     if unseen:
         lines.append(f"no photo saw planned tag(s) {', '.join(map(str, unseen))}: photograph their spots "
                      f"(at least {MIN_PHOTOS} photos each, with a neighbouring tag in view) and run check again")
