@@ -16,7 +16,13 @@ Pairing planned spots with installed tags (all in the internal frame, metres):
 2. the remaining spots and installed tags are paired by least total distance (Hungarian) within
    ``radius`` and with normals less than 90 degrees apart: a different id at the spot is a
    ``wrong id`` (``swapped`` when the two ids sit on each other's spots);
-3. spots left are ``missing``; installed tags left are ``extra``.
+3. spots left are ``missing``; installed tags left are ``extra``; with ``unmeasured`` (a photo
+   check, :mod:`markerplace.plan.photo_check`), a spot left whose tag could not be measured is
+   ``not measured``: scored as planned (unknown is not lost) and without a shift or a move.
+
+``shift_deg`` is the angle of the rotation from the planned to the installed tag (a tag turned
+on its wall counts; tags measured by position and normal hang upright, so for them it is the
+angle between the normals).
 
 What to do is said in the installer's terms (:func:`directions`): as you face the planned spot's
 wall, how far to move the tag left or right, up or down, into or out from the wall, and how to
@@ -39,6 +45,7 @@ import numpy as np
 from markerplace.errors import UserError
 from markerplace.imaging.engine import EngineSpec, imaging_job
 from markerplace.imaging.visibility import marker_points
+from markerplace.localization.tag_anchor import rotation_deg
 from markerplace.plan.place.greedy import apply_coverages
 from markerplace.plan.score.localizability import entropy
 from markerplace.plan.score.stage import build_coverages, geometric_visibility
@@ -64,15 +71,19 @@ class TagRow:
     Attributes:
         order, planned_id: placement order and tag id of the spot (None for extras).
         installed_id: id of the tag found at the spot (None when missing).
-        status: ``as planned``, ``shifted``, ``wrong id``, ``swapped``, ``missing`` or ``extra``.
+        status: ``as planned``, ``shifted``, ``wrong id``, ``swapped``, ``missing``, ``not measured``
+            or ``extra``.
         shift_m, shift_deg: distance between the planned and installed centres (metres) and the
-            angle between their normals (degrees); None when missing.
-        score_lost: mean score drop over all poses from this spot alone (nats; negative = gain).
+            angle of the rotation between them (degrees); None when missing.
+        score_lost: mean score drop over all poses from this spot alone (nats; negative = gain;
+            None when not measured).
         score_lost_seen: the same over the poses that see the planned tag.
         planned, installed: (4, 4) ``world_from_marker`` (internal frame) or None.
         note: what to do, in words.
         move: how to bring the installed tag onto its spot, as you face the spot's wall
             (:func:`correction`), or None when missing or extra.
+        measured: how a photo check measured the installed tag (``position_std_m``,
+            ``rotation_std_deg``, ``photos``, ``photo``), else None.
     """
 
     order: int
@@ -87,6 +98,7 @@ class TagRow:
     installed: np.ndarray | None = None
     note: str = ""
     move: dict | None = None
+    measured: dict | None = None
 
 
 @dataclass
@@ -106,11 +118,6 @@ class CheckResult:
     base_score: np.ndarray
     disc: object
     extra: dict = field(default_factory=dict)
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    c = float(np.clip(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
-    return float(np.degrees(np.arccos(c)))
 
 
 def correction(planned: np.ndarray, installed: np.ndarray) -> dict:
@@ -227,7 +234,7 @@ def _scores_with(info: np.ndarray, score: np.ndarray, remove: Sequence[MarkerCov
 
 def _status(planned, inst, tol_m: float, tol_deg: float) -> tuple[str, float, float]:
     shift = float(np.linalg.norm(inst.position - planned.position))
-    angle = _angle_deg(inst.normal, planned.normal)
+    angle = rotation_deg(planned.world_from_marker, inst.world_from_marker)
     if int(inst.tag_id) != int(planned.tag_id):
         return "wrong id", shift, angle
     return ("as planned" if shift <= tol_m and angle <= tol_deg else "shifted"), shift, angle
@@ -235,7 +242,7 @@ def _status(planned, inst, tol_m: float, tol_deg: float) -> tuple[str, float, fl
 
 def compare(data, planned: Sequence, planned_candidates: Sequence[int], installed: Sequence,
             installed_covs: Sequence[MarkerCoverage], *, radius: float = MATCH_RADIUS_M,
-            tol_m: float = TOLERANCE_M, tol_deg: float = TOLERANCE_DEG) -> CheckResult:
+            tol_m: float = TOLERANCE_M, tol_deg: float = TOLERANCE_DEG, unmeasured=()) -> CheckResult:
     """Pair, score and explain (see module docstring).
 
     Args:
@@ -244,6 +251,7 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
         planned: placed markers (internal frame), placement order.
         planned_candidates: their candidate indices into ``data.coverages``.
         installed: measured markers (internal frame); ``installed_covs`` their coverages.
+        unmeasured: planned tag ids a photo check could not measure (module docstring, step 3).
     """
     if len(planned_candidates) != len(planned):
         raise UserError("placement.json lists markers without a candidate index: re-run `markerplace plan`")
@@ -251,9 +259,11 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
     planned_covs = [data.coverages[int(c)] for c in planned_candidates]
     info_planned = apply_coverages(data.base_info, existing_covs + planned_covs)
     score_planned = -entropy(info_planned)
-    info_installed = apply_coverages(data.base_info, existing_covs + list(installed_covs))
-    score_installed = -entropy(info_installed)
     pairs = pair_markers(planned, installed, radius)
+    unknown = [i for i, m in enumerate(planned) if int(m.tag_id) in set(unmeasured) and i not in pairs]
+    info_installed = apply_coverages(data.base_info, existing_covs + list(installed_covs) +
+                                     [planned_covs[i] for i in unknown])
+    score_installed = -entropy(info_installed)
     spot_of_id = {int(planned[i].tag_id): int(installed[j].tag_id) for i, j in pairs.items()}
     rows = []
     mean_planned = float(score_planned.mean())
@@ -264,6 +274,11 @@ def compare(data, planned: Sequence, planned_candidates: Sequence[int], installe
         seen = planned_covs[i].pose_idx
         lost_seen = float((score_planned[seen] - s[seen]).mean()) if len(seen) else 0.0
         move = None
+        if i in unknown:
+            rows.append(TagRow(i + 1, int(m.tag_id), None, "not measured", None, None, None, None,
+                               np.asarray(m.world_from_marker, float), None,
+                               f"tag {m.tag_id} not measured: see the guidance below; it is scored as planned"))
+            continue
         if j is None:
             status, shift, angle, iid = "missing", None, None, None
             note = f"tag {m.tag_id} not found within {radius:g} m of its spot #{i + 1}: hang it there"

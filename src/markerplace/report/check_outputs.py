@@ -18,6 +18,13 @@ metres, the file's coordinates):
   (:mod:`markerplace.report.check_page`, written by the pipeline after these);
 * ``tagmaps/``: the known-tag maps of the tags as installed (what the robot should load;
   :mod:`markerplace.report.tagmaps`).
+
+After ``--photos`` also: per tag row the standard deviation of its recovered pose
+(``position_std_m``, ``rotation_std_deg``), the number of photos that saw it and ``photo``, one
+photo of it with the detection drawn (``photos/tag_<id>.png``, the bottom edge red); in
+``check.json`` a ``photos`` object (photos, placed, without tags, not placed, the tags that
+anchor each set of photos, the reprojection RMS) and ``guidance``: what to photograph next
+(also printed); ``photo_cache/``: the detections per photo (re-used by the next run).
 """
 
 from __future__ import annotations
@@ -49,7 +56,7 @@ def _user(T, offset):
     return None if T is None else poses_to_user(T, offset)
 
 
-def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed_user) -> str:
+def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed_user, photos: dict | None = None) -> str:
     run_folder.make_dirs(out)
     disc = discretization_to_user(result.disc, offset)
     sp, si = result.score_planned, result.score_installed
@@ -66,7 +73,11 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
                      "score_lost": r.score_lost, "score_lost_seen": r.score_lost_seen,
                      "planned_position": None if P is None else P[:3, 3].tolist(),
                      "installed_position": None if Q is None else Q[:3, 3].tolist(),
-                     "installed_normal": None if Q is None else Q[:3, 2].tolist(), "move": r.move, "note": r.note})
+                     "installed_normal": None if Q is None else Q[:3, 2].tolist(),
+                     "installed_world_from_marker": None if Q is None else Q.tolist(), "move": r.move, "note": r.note})
+        if photos is not None:
+            mz = r.measured or {}
+            rows[-1].update({k: mz.get(k) for k in ("position_std_m", "rotation_std_deg", "photos", "photo")})
     storeys = np.asarray(disc.storeys, float)
     worst_rows = [{"storey": int(disc.location_storey[i]), "floor_z": float(storeys[disc.location_storey[i]]),
                    "x": float(disc.locations[i, 0]), "y": float(disc.locations[i, 1]),
@@ -77,18 +88,23 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
                "p10_score_planned": float(np.percentile(sp, 10)), "p10_score_installed": float(np.percentile(si, 10)),
                "poses_losing_over_1_nat": int((drop > 1.0).sum()),
                "statuses": {s: sum(r["status"] == s for r in rows) for s in dict.fromkeys(r["status"] for r in rows)}}
-    write_json(out / "check.json", {"plan": str(folder.path), "summary": summary, "tags": rows,
-                                    "worst_locations": worst_rows})
+    report = {"plan": str(folder.path), "summary": summary, "tags": rows, "worst_locations": worst_rows}
+    if photos is not None:
+        report.update({"photos": {k: v for k, v in photos.items() if k != "guidance"}, "guidance": photos["guidance"]})
+    write_json(out / "check.json", report)
     buf = io.StringIO()
     w = csv.writer(buf)
+    extra_cols = ["position_std_m", "rotation_std_deg", "photos", "photo"] if photos is not None else []
     w.writerow(["order", "planned_id", "installed_id", "status", "shift_m", "shift_deg", "move_right_m", "move_up_m",
-                "move_out_m", "score_lost", "x", "y", "z", "note"])
+                "move_out_m", "score_lost", "x", "y", "z", *extra_cols, "note"])
     for r in rows:
         pos = r["installed_position"] or r["planned_position"]
         mv = r["move"] or {}
+        extra = [fixed(r["position_std_m"], 4), fixed(r["rotation_std_deg"], 2), _s(r["photos"]), _s(r["photo"])] \
+            if photos is not None else []
         w.writerow([r["order"] or "", _s(r["planned_id"]), _s(r["installed_id"]), r["status"], fixed(r["shift_m"], 3),
                     fixed(r["shift_deg"], 1), *(fixed(mv.get(k), 3) for k in ("right_m", "up_m", "out_m")),
-                    fixed(r["score_lost"], 4), *(fixed(v, 3) for v in pos), r["note"]])
+                    fixed(r["score_lost"], 4), *(fixed(v, 3) for v in pos), *extra, r["note"]])
     with atomic_path(out / "check.csv") as tmp:
         tmp.write_text(buf.getvalue())
     slots = {int(s): k for k, s in enumerate(disc.planned_storeys)}
@@ -118,19 +134,19 @@ def write_check_outputs(out: Path, result, offset: np.ndarray, folder, installed
               missing_panel=panel(miss_xyz[:, 2]))
     write_known_tag_maps(out / "tagmaps", list(installed_user) + list(folder.existing), "installed", disc,
                          folder.scene, folder.scene_options.get("up"))
-    return _text(out, summary, rows, worst_rows)
+    return _text(out, summary, rows, worst_rows, photos)
 
 
 def _s(v) -> str:
     return "" if v is None else str(v)
 
 
-def _text(out: Path, summary: dict, rows: list, worst: list) -> str:
-    lines = [f"{'spot':>4} {'planned':>7} {'found':>5}  {'status':<10} {'shift m':>7} {'deg':>5} {'lost':>7}  what to do"]
+def _text(out: Path, summary: dict, rows: list, worst: list, photos: dict | None = None) -> str:
+    lines = [f"{'spot':>4} {'planned':>7} {'found':>5}  {'status':<12} {'shift m':>7} {'deg':>5} {'lost':>7}  what to do"]
     for r in rows:
         lines.append(f"{_s(r['order']) or '-':>4} {_s(r['planned_id']) or '-':>7} {_s(r['installed_id']) or '-':>5}  "
-                     f"{r['status']:<10} {fixed(r['shift_m'], 2, '-'):>7} {fixed(r['shift_deg'], 0, '-'):>5} "
-                     f"{fixed(r['score_lost'], 3):>7}  {r['note']}")
+                     f"{r['status']:<12} {fixed(r['shift_m'], 2, '-'):>7} {fixed(r['shift_deg'], 0, '-'):>5} "
+                     f"{fixed(r['score_lost'], 3, '-'):>7}  {r['note']}")
     lines.append(f"score (mean -H over {summary['num_poses']} poses): planned {fixed(summary['mean_score_planned'], 3)}, "
                  f"installed {fixed(summary['mean_score_installed'], 3)}, lost {fixed(summary['mean_score_lost'], 3)} "
                  f"nats; 10th percentile {fixed(summary['p10_score_planned'], 3)} -> "
@@ -142,5 +158,11 @@ def _text(out: Path, summary: dict, rows: list, worst: list) -> str:
                   "nats)" for w in worst]
     else:
         lines.append("no camera location lost anything")
-    lines.append(f"wrote {out}/check.json, check.csv, check_map.png, check.html, tagmaps/ (the tags as installed)")
+    if photos is not None:
+        lines.append(f"photos: {photos['photos']}, {photos['placed']} placed on the model by tags "
+                     f"{'; '.join(', '.join(map(str, a)) for a in photos['anchors'])} (reprojection RMS "
+                     f"{fixed(photos['reprojection_rms_px'], 2)} px)")
+        lines += [f"next: {g}" for g in photos["guidance"]] or ["next: nothing: every planned tag was measured"]
+    lines.append(f"wrote {out}/check.json, check.csv, check_map.png, check.html, tagmaps/ (the tags as installed)"
+                 + (", photos/ (each tag's detection)" if photos is not None else ""))
     return "\n".join(lines)
