@@ -3,7 +3,7 @@
 # with OMP on a floor built for planning to pay (`corridor-small`: four identical guest rooms off a
 # plain corridor), plan on a scan-like mesh, and measure on a short simulation whether the plan
 # beats random and evenly spaced tags (its protocol: docs/protocols.md, "Demo: corridor-small").
-# Measured: 620 CPU-seconds (set-up included), 10 min 40 s wall on 2 shared cores (docs/results/corridor.md, the demo).
+# Measured on a fresh clone, set-up included: 6 min 55 s wall, 648 CPU-seconds on 2 idle cores (docs/results/corridor.md, the demo).
 # Ends by printing the path of the plan's report.html.
 set -euo pipefail
 cd "$(dirname "$0")/.."
