@@ -253,6 +253,19 @@ def area(lines: list[tuple[float, str]], out: Path) -> None:
         emit("candidates", int(poses[1].group(2)))
 
 
+def emit_steps(prefix: str, t: dict, steps: tuple) -> float:
+    """Median and mean ms of each step's timings ``t[step]`` (ms per item), their total, and each
+    step's share of the mean total; returns the mean total ms."""
+    total = np.sum([t[s] for s in steps], axis=0)
+    for s in steps + ("total",):
+        v = np.asarray(total if s == "total" else t[s])
+        emit(f"{prefix}.{s}.median_ms", float(np.median(v)))
+        emit(f"{prefix}.{s}.mean_ms", float(np.mean(v)))
+        if s != "total":
+            emit(f"{prefix}.{s}.share_of_mean", float(np.mean(v) / np.mean(total)))
+    return float(np.mean(total))
+
+
 def _send(conn, obj) -> None:
     conn.send(obj)
 
@@ -321,19 +334,13 @@ def per_pose(args, spec, up, out: Path) -> None:
         finish_ms = 1000 * (time.perf_counter() - c0) / len(pick)
     engine.close()
     t["bookkeeping"] = [x + finish_ms for x in t["bookkeeping"]]
-    total = np.sum([t[s] for s in steps], axis=0)
     emit("per_pose.poses_timed", len(pick))
     emit("per_pose.features_with_3d_mean", float(np.mean(nfeat)))
     emit("per_pose.result_bytes_mean", float(np.mean(nbytes)))
-    for s in steps + ("total",):
-        v = np.asarray(total if s == "total" else t[s])
-        emit(f"per_pose.{s}.median_ms", float(np.median(v)))
-        emit(f"per_pose.{s}.mean_ms", float(np.mean(v)))
-        if s != "total":
-            emit(f"per_pose.{s}.share_of_mean", float(np.mean(v) / np.mean(total)))
+    mean_ms = emit_steps("per_pose", t, steps)
     emit("per_pose.render_depth_only.median_ms", float(np.median(depth_only)))
     emit("per_pose.render_depth_only.mean_ms", float(np.mean(depth_only)))
-    emit("per_pose.observe_one_core_s_all_poses", float(np.mean(total)) / 1000 * len(poses))
+    emit("per_pose.observe_one_core_s_all_poses", mean_ms / 1000 * len(poses))
 
 
 def per_frame(args, out: Path) -> None:
@@ -346,7 +353,8 @@ def per_frame(args, out: Path) -> None:
     from markerplace.pipelines.plan_frames import frames_config
     from markerplace.plan.config import PlanConfig
     from markerplace.plan.discretize.artifact import load as load_discretization
-    from markerplace.scan.frames import load_frame, open_frameset
+    from markerplace.scan.frame_images import load_frame
+    from markerplace.scan.frames import open_frameset
 
     written = json.loads((out / "config.json").read_text())
     options = written["scene_options"]
@@ -386,15 +394,9 @@ def per_frame(args, out: Path) -> None:
             for s, dt in zip(steps, (c1 - c0, c2 - c1, c3 - c2, c4 - c3, c6 - c5, (c5 - c4) + (c7 - c6))):
                 t[s].append(1000 * dt)
         writer.finish()
-    total = np.sum([t[s] for s in steps], axis=0)
     emit("per_frame.frames_timed", len(pick))
-    for s in steps + ("total",):
-        v = np.asarray(total if s == "total" else t[s])
-        emit(f"per_frame.{s}.median_ms", float(np.median(v)))
-        emit(f"per_frame.{s}.mean_ms", float(np.mean(v)))
-        if s != "total":
-            emit(f"per_frame.{s}.share_of_mean", float(np.mean(v) / np.mean(total)))
-    emit("per_frame.observe_one_core_s_all_frames", float(np.mean(total)) / 1000 * len(indices))
+    mean_ms = emit_steps("per_frame", t, steps)
+    emit("per_frame.observe_one_core_s_all_frames", mean_ms / 1000 * len(indices))
 
 
 def main() -> int:

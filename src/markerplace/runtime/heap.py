@@ -11,9 +11,9 @@ top of the heap), the next image reuses the same pages: about one fault and no s
 call. Nothing computed changes (the allocator's policy only); the price is that a process keeps
 up to :data:`TRIM_THRESHOLD` bytes of freed memory, so its resident size stays near its peak.
 
-Applied in every worker (:func:`markerplace.runtime.workers.single_threaded_libraries`: the
-render workers of a plan and of the testbed, the frames workers) and in the processes that look
-at photographs or fuse frames themselves (:mod:`markerplace.plan.frames.observations`, the fusion).
+Applied to every executor's worker state (:func:`markerplace.runtime.workers.single_threaded_libraries`,
+run by :mod:`markerplace.runtime.executor` for pools, Dask and in-process runs alike: renders,
+frames, photographs) and by the fusion of frames (:mod:`markerplace.scan.fuse`).
 Measured: on textured built-in scenes the render workers fault as much as the photograph paths
 (``room``: 13,600 faults and 48 ms of system time per SIFT call before, 1 ms after; ``plan house
 -k 8``: 211 -> 188 CPU s, the same plan); on the 1.1-million-triangle scan-like house the

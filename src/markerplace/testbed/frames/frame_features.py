@@ -40,7 +40,6 @@ from markerplace.localization.tags import detect_tags
 from markerplace.markers import Marker
 from markerplace.runtime.cache import hash_of
 from markerplace.runtime.executor import WorkerJob
-from markerplace.runtime.heap import keep_freed_memory
 from markerplace.scan.frame_images import load_frame
 from markerplace.scan.frameset import FrameSet
 from markerplace.scene.spec import SceneSpec
@@ -97,7 +96,6 @@ class FrameWorker:
 
 
 def _build(spec: FrameJobSpec) -> FrameWorker:
-    keep_freed_memory()  # SIFT on photographs: no page faults per image (markerplace.runtime.heap)
     return FrameWorker(spec)
 
 
